@@ -1,0 +1,19 @@
+"""crllk: constrained reinforcement learning for Duckiebot lane keeping in MuJoCo.
+
+``crllk.load(task, observation=..., action=..., seed=...)`` returns a dm-control environment;
+``crllk.maps.load_map(name_or_path)`` returns a map with its exact lane geometry.
+"""
+
+from __future__ import annotations
+
+import os
+
+# Headless rendering must be chosen before mujoco or dm_control is imported.
+os.environ.setdefault("MUJOCO_GL", "egl")
+os.environ.setdefault("PYOPENGL_PLATFORM", os.environ["MUJOCO_GL"])
+
+from crllk import maps  # noqa: E402
+from crllk.lane_keeping import load  # noqa: E402
+
+__all__ = ["load", "maps"]
+__version__ = "0.1.0"

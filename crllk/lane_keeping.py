@@ -1,0 +1,235 @@
+"""Lane keeping on a Duckietown map as a dm-control task.
+
+Per control step (30 Hz by default): the action becomes wheel duty cycles; the reward is the
+forward progress along the lane (m); ``cost_lane`` is |lateral offset| in decimetres (10 off
+the road); ``cost_collision`` is 1 on the step that ends in a collision or a road departure.
+The episode terminates (discount 0) when a footprint check point leaves the road, the chassis
+touches an obstacle or the physics diverges; the 512-step time limit is a truncation.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from dm_control.rl import control
+from dm_control.suite import base
+from dm_env import specs
+
+from crllk.actions import discrete_to_duty, velocity_steering_to_duty
+from crllk.maps import DuckietownMap, LanePose, MapObject
+from crllk.sim.physics import Physics, check_points
+from crllk.task_config import TaskConfig, load_task_config
+
+OBSERVATIONS = ("pixels", "state")
+ACTIONS = ("discrete", "continuous")
+
+_CURVATURE_LOOKAHEAD = (0.15, 0.3, 0.6)
+"""Distances ahead (m) at which the state observation reports lane curvature."""
+_OBSTACLE_RANGE = 1.5
+"""Obstacles farther ahead than this (m) are reported at this distance."""
+_OBSTACLE_CORRIDOR = 0.3
+"""Half-width of the corridor ahead searched for obstacles (m)."""
+_SPAWN_ATTEMPTS = 1000
+_METRES_TO_DECIMETRES = 10.0
+
+
+@dataclass(frozen=True)
+class StepOutcome:
+    """What one control step did; the task keeps the last one for its hooks."""
+
+    progress: float
+    lane_pose: LanePose
+    cost_lane: float
+    cost_collision: float
+    termination: str | None
+    """None, or why the episode ended: 'off_road', 'collision' or 'unstable'."""
+
+
+def state_feature_names(config: TaskConfig) -> list[str]:
+    """Names of the entries of the ``state`` observation, in order."""
+    names = ["lateral_offset", "heading_error_sin", "heading_error_cos", "forward_speed",
+             "yaw_rate"]
+    names += [f"curvature_{d:g}m" for d in _CURVATURE_LOOKAHEAD]
+    names += ["obstacle_distance", "obstacle_lateral"]
+    for k in range(_command_history_length(config)):
+        names += [f"duty_left_t-{k}", f"duty_right_t-{k}"]
+    return names
+
+
+def _command_history_length(config: TaskConfig) -> int:
+    """Commands still in flight through the motor delay, plus the newest one."""
+    return max(1, math.ceil(config.motor.delay * config.control_rate - 1e-9))
+
+
+class LaneKeeping(base.Task):
+    """Drive far along the lane; the costs report lane deviation and collisions."""
+
+    def __init__(self, config: TaskConfig, observation: str = "pixels",
+                 action: str = "discrete", random: np.random.RandomState | int | None = None):
+        if observation not in OBSERVATIONS:
+            raise ValueError(f"observation must be one of {OBSERVATIONS}, got {observation!r}")
+        if action not in ACTIONS:
+            raise ValueError(f"action must be one of {ACTIONS}, got {action!r}")
+        super().__init__(random=random)
+        self.config = config
+        self.map: DuckietownMap = config.map
+        self.observation_type = observation
+        self.action_type = action
+        self._history = np.zeros((_command_history_length(config), 2))
+        self._outcome: StepOutcome | None = None
+        self._previous_pose: tuple[float, float, float] | None = None
+
+    # ----- specs ------------------------------------------------------------------------
+    def action_spec(self, physics: Physics):
+        if self.action_type == "discrete":
+            return specs.DiscreteArray(num_values=3, dtype=np.int64, name="action")
+        return specs.BoundedArray((2,), np.float64, -1.0, 1.0, name="action")
+
+    # ----- episode ----------------------------------------------------------------------
+    def initialize_episode(self, physics: Physics) -> None:
+        x, y, yaw = self._spawn_pose()
+        physics.set_pose(x, y, yaw)
+        physics.forward()
+        self._history[:] = 0.0
+        self._previous_pose = (x, y, yaw)
+        pose = self.map.lane_pose(x, y, yaw)
+        self._outcome = StepOutcome(0.0, pose, self._lane_cost(pose), 0.0, None)
+        super().initialize_episode(physics)
+
+    def _spawn_pose(self) -> tuple[float, float, float]:
+        spawn = self.config.spawn
+        tiles = self.map.road_tiles
+        for _ in range(_SPAWN_ATTEMPTS):
+            tile = tiles[self.random.randint(len(tiles))]
+            lanes = self.map.tile_lanes(tile.column, tile.row)
+            lane = lanes[self.random.randint(len(lanes))]
+            along = self.random.uniform(0.0, lane.length)
+            lateral = self.random.uniform(*spawn.lateral_offset)
+            x, y, heading = lane.point_at(along, lateral)
+            yaw = heading + self.random.uniform(*spawn.heading_error)
+            if self._spawn_is_clear(x, y, yaw):
+                return x, y, yaw
+        raise RuntimeError(f"{self.config.source}: spawn: no clear start pose found in "
+                           f"{_SPAWN_ATTEMPTS} tries; lower spawn.obstacle_clearance")
+
+    def _spawn_is_clear(self, x: float, y: float, yaw: float) -> bool:
+        clearance = self.config.spawn.obstacle_clearance
+        if any(_distance_to_footprint(obj, x, y) < clearance for obj in self.map.objects):
+            return False
+        return all(self.map.is_road(px, py) for px, py in check_points(x, y, yaw))
+
+    # ----- stepping ---------------------------------------------------------------------
+    def before_step(self, action, physics: Physics) -> None:
+        if self.action_type == "discrete":
+            duty = discrete_to_duty(np.asarray(action).item())
+        else:
+            duty = velocity_steering_to_duty(np.asarray(action, dtype=np.float64).reshape(2))
+        self._history = np.roll(self._history, 1, axis=0)
+        self._history[0] = duty
+        self._previous_pose = physics.pose()
+        physics.set_wheel_duty(duty)
+
+    def after_step(self, physics: Physics) -> None:
+        x, y, yaw = physics.pose()
+        pose = self.map.lane_pose(x, y, yaw)
+        px, py, pyaw = self._previous_pose
+        heading = self.map.lane_pose(px, py, pyaw).lane.project(px, py).heading
+        progress = (x - px) * math.cos(heading) + (y - py) * math.sin(heading)
+        termination = None
+        if physics.diverged:
+            termination, progress = "unstable", 0.0
+        elif not all(self.map.is_road(cx, cy) for cx, cy in physics.footprint_check_points()):
+            termination = "off_road"
+        elif physics.touches_obstacle():
+            termination = "collision"
+        off_road = termination == "off_road" or not pose.on_road
+        cost_lane = self.config.off_road_lane_cost if off_road else self._lane_cost(pose)
+        cost_collision = 1.0 if termination in ("off_road", "collision") else 0.0
+        self._outcome = StepOutcome(progress, pose, cost_lane, cost_collision, termination)
+
+    def _lane_cost(self, pose: LanePose) -> float:
+        if not pose.on_road:
+            return self.config.off_road_lane_cost
+        return abs(pose.lateral) * _METRES_TO_DECIMETRES
+
+    @property
+    def outcome(self) -> StepOutcome:
+        """The last step's progress, lane pose, costs and termination reason."""
+        return self._outcome
+
+    def get_reward(self, physics: Physics) -> float:
+        return self._outcome.progress
+
+    def get_termination(self, physics: Physics) -> float | None:
+        return 0.0 if self._outcome.termination else None
+
+    def get_observation(self, physics: Physics) -> dict[str, Any]:
+        obs: dict[str, Any] = {}
+        if self.observation_type == "pixels":
+            cam = self.config.camera
+            obs["pixels"] = physics.render_camera(cam.height, cam.width, cam.supersample)
+        else:
+            obs["state"] = self.state_features(physics)
+        obs["cost_lane"] = np.float64(self._outcome.cost_lane)
+        obs["cost_collision"] = np.float64(self._outcome.cost_collision)
+        return obs
+
+    def state_features(self, physics: Physics) -> np.ndarray:
+        """The ``state`` observation; see :func:`state_feature_names`."""
+        pose = self._outcome.lane_pose
+        x, y, yaw = physics.pose()
+        curvature = self.map.curvature_ahead(pose, _CURVATURE_LOOKAHEAD)
+        obstacle = _nearest_obstacle_ahead(self.map.objects, x, y, yaw)
+        return np.concatenate([
+            [pose.lateral, math.sin(pose.heading_error), math.cos(pose.heading_error),
+             physics.forward_speed(), physics.yaw_rate()],
+            curvature, obstacle, self._history.reshape(-1)]).astype(np.float64)
+
+
+def _distance_to_footprint(obj: MapObject, x: float, y: float) -> float:
+    """Distance (m) from a point to an object's footprint rectangle (0 inside)."""
+    c, s = math.cos(obj.yaw), math.sin(obj.yaw)
+    dx, dy = x - obj.x, y - obj.y
+    u, v = c * dx + s * dy, -s * dx + c * dy
+    return math.hypot(max(abs(u) - obj.length / 2, 0.0), max(abs(v) - obj.width / 2, 0.0))
+
+
+def _nearest_obstacle_ahead(objects, x: float, y: float, yaw: float) -> list[float]:
+    """(distance, lateral) in m of the nearest obstacle in a corridor ahead of the robot."""
+    best = [_OBSTACLE_RANGE, 0.0]
+    c, s = math.cos(yaw), math.sin(yaw)
+    for obj in objects:
+        dx, dy = obj.x - x, obj.y - y
+        ahead, left = c * dx + s * dy, -s * dx + c * dy
+        reach = max(obj.length, obj.width) / 2
+        if ahead + reach > 0 and abs(left) < _OBSTACLE_CORRIDOR + reach:
+            distance = max(ahead - reach, 0.0)
+            if distance < best[0]:
+                best = [distance, -left]
+    return best
+
+
+def load(task: str | Path, *, observation: str = "pixels", action: str = "discrete",
+         seed: int | np.random.RandomState | None = None,
+         overrides: dict[str, Any] | None = None) -> control.Environment:
+    """A ``dm_control.rl.control.Environment`` for lane keeping.
+
+    Args:
+        task: a task name (``small_loop``, ``zigzag``, ``obstacle_loop``) or the path of a task
+            or Duckietown map file.
+        observation: ``"pixels"`` (camera, uint8 HxWx3) or ``"state"`` (lane-relative features).
+        action: ``"discrete"`` (3 duty pairs) or ``"continuous"`` ((velocity, steering)).
+        seed: seeds the spawn.
+        overrides: task settings to replace, e.g. ``{"horizon": 64}``.
+    """
+    config = load_task_config(task, overrides)
+    physics = Physics.from_map(config.map, config.motor)
+    lane_task = LaneKeeping(config, observation=observation, action=action, random=seed)
+    steps = config.horizon
+    return control.Environment(
+        physics, lane_task, time_limit=steps * config.control_timestep * (1 - 1e-9),
+        control_timestep=config.control_timestep)

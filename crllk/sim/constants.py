@@ -1,0 +1,33 @@
+"""Names of the Duckiebot's MJCF elements and its physical constants (SI units)."""
+
+from __future__ import annotations
+
+ROBOT_PREFIX = "duckiebot/"
+CHASSIS = ROBOT_PREFIX + "chassis"
+ROOT_JOINT = ROBOT_PREFIX + "root"
+FOOTPRINT_GEOM = ROBOT_PREFIX + "footprint"
+LEFT_WHEEL_JOINT = ROBOT_PREFIX + "left_wheel"
+RIGHT_WHEEL_JOINT = ROBOT_PREFIX + "right_wheel"
+FORWARD_ACTUATOR = ROBOT_PREFIX + "forward"
+TURN_ACTUATOR = ROBOT_PREFIX + "turn"
+CAMERA = ROBOT_PREFIX + "camera"
+CHASE_CAMERA = ROBOT_PREFIX + "chase"
+OVERHEAD_CAMERA = "overhead"
+OBSTACLE_PREFIX = "obstacle/"
+
+WHEEL_RADIUS = 0.0318
+"""Kinematic wheel radius (m)."""
+WHEEL_DISTANCE = 0.102
+"""Distance between the wheel contact points (m)."""
+FOOTPRINT_LENGTH = 0.18
+FOOTPRINT_WIDTH = 0.15
+FOOTPRINT_CENTRE_BEHIND_AXLE = 0.024
+"""The collision footprint's centre lies this far behind the axle (m)."""
+
+PHYSICS_TIMESTEP = 1.0 / 240.0
+"""Physics step (s): eight substeps per 30 Hz control step."""
+
+FORWARD_SERVO_GAIN = 0.1
+"""Velocity servo gain of the forward tendon actuator (N m s / rad)."""
+TURN_SERVO_GAIN = 0.05
+"""Velocity servo gain of the turn tendon actuator (N m s / rad)."""

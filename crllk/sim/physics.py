@@ -1,0 +1,144 @@
+"""The Duckiebot's physics: named accessors, motor commands, camera rendering, safe stepping."""
+
+from __future__ import annotations
+
+import logging
+import math
+
+import mujoco
+import numpy as np
+from dm_control import mujoco as dm_mujoco
+from dm_control.mujoco.wrapper import MjModel
+from dm_control.rl import control
+
+from crllk.maps import DuckietownMap
+from crllk.sim import constants as C
+from crllk.sim.scene import compile_scene
+from crllk.task_config import MotorConfig
+
+log = logging.getLogger(__name__)
+
+
+def check_points(x: float, y: float, yaw: float) -> np.ndarray:
+    """World (x, y) of the footprint's centre, left, right and front points for an axle pose
+    (x, y, yaw); shape (4, 2). All four must lie on road tiles."""
+    c, s = math.cos(yaw), math.sin(yaw)
+    back = -C.FOOTPRINT_CENTRE_BEHIND_AXLE
+    local = np.array([[back, 0.0], [back, C.FOOTPRINT_WIDTH / 2],
+                      [back, -C.FOOTPRINT_WIDTH / 2], [back + C.FOOTPRINT_LENGTH / 2, 0.0]])
+    return np.column_stack([x + c * local[:, 0] - s * local[:, 1],
+                            y + s * local[:, 0] + c * local[:, 1]])
+
+
+class Physics(dm_mujoco.Physics):
+    """A Duckietown scene with one Duckiebot. Lengths in m, angles in rad, times in s."""
+
+    @classmethod
+    def from_map(cls, dmap: DuckietownMap, motor: MotorConfig | None = None) -> Physics:
+        """Build and compile the scene of ``dmap`` with the Duckiebot."""
+        physics = cls.from_model(MjModel(compile_scene(dmap, motor)))
+        physics.motor = motor or MotorConfig()
+        return physics
+
+    def _reload_from_data(self, data) -> None:
+        super()._reload_from_data(data)
+        self.motor = MotorConfig()
+        self.instabilities = 0
+        """Physics steps that diverged since construction."""
+        self.diverged = False
+        """Whether the last :meth:`step` diverged (the state was reset)."""
+        self._renderers: dict[tuple[int, int], mujoco.Renderer] = {}
+        self._obstacle_geoms = np.array(
+            [i for i in range(self.model.ngeom)
+             if (self.model.id2name(i, "geom") or "").startswith(C.OBSTACLE_PREFIX)], dtype=int)
+        self._footprint_geom = self.model.name2id(C.FOOTPRINT_GEOM, "geom")
+        self._root_qpos = self.model.jnt_qposadr[self.model.name2id(C.ROOT_JOINT, "joint")]
+        self._root_qvel = self.model.jnt_dofadr[self.model.name2id(C.ROOT_JOINT, "joint")]
+
+    # ----- state accessors --------------------------------------------------------------
+    def pose(self) -> tuple[float, float, float]:
+        """Axle-centre position x, y (m) and yaw (rad, CCW from +x)."""
+        q = self.data.qpos
+        a = self._root_qpos
+        w, x, y, z = q[a + 3:a + 7]
+        yaw = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+        return float(q[a]), float(q[a + 1]), yaw
+
+    def forward_speed(self) -> float:
+        """Speed along the robot's heading (m/s)."""
+        _, _, yaw = self.pose()
+        v = self.data.qvel[self._root_qvel:self._root_qvel + 2]
+        return float(v[0] * math.cos(yaw) + v[1] * math.sin(yaw))
+
+    def yaw_rate(self) -> float:
+        """Angular velocity about the vertical axis (rad/s)."""
+        return float(self.data.qvel[self._root_qvel + 5])
+
+    def wheel_speeds(self) -> np.ndarray:
+        """Wheel angular velocities (left, right) (rad/s), positive rolling forward."""
+        return np.array([self.named.data.qvel[C.LEFT_WHEEL_JOINT][0],
+                         self.named.data.qvel[C.RIGHT_WHEEL_JOINT][0]])
+
+    def footprint_check_points(self) -> np.ndarray:
+        """World (x, y) of the footprint's centre, left, right and front points, shape (4, 2)."""
+        return check_points(*self.pose())
+
+    def touches_obstacle(self) -> bool:
+        """Whether the chassis footprint is in contact with any obstacle."""
+        if self.data.ncon == 0 or len(self._obstacle_geoms) == 0:
+            return False
+        contacts = self.data.contact
+        g1, g2 = contacts.geom1, contacts.geom2
+        mine = (g1 == self._footprint_geom) | (g2 == self._footprint_geom)
+        return bool(np.any(mine & (np.isin(g1, self._obstacle_geoms)
+                                   | np.isin(g2, self._obstacle_geoms))))
+
+    # ----- commands ---------------------------------------------------------------------
+    def set_pose(self, x: float, y: float, yaw: float) -> None:
+        """Place the robot at rest with its wheels on the floor."""
+        a = self._root_qpos
+        self.data.qpos[a:a + 3] = (x, y, C.WHEEL_RADIUS)
+        self.data.qpos[a + 3:a + 7] = (math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2))
+        self.data.qvel[:] = 0.0
+
+    def set_wheel_duty(self, duty: np.ndarray) -> None:
+        """Command duty cycles (left, right) in [-1, 1] through the DB18 motor model."""
+        left, right = np.clip(duty, -1.0, 1.0)
+        self.data.ctrl[0] = self.motor.max_speed * 0.5 * (left + right)
+        self.data.ctrl[1] = self.motor.yaw_rate_per_duty * (right - left)
+
+    # ----- stepping ---------------------------------------------------------------------
+    def step(self, nstep: int = 1) -> None:
+        """Step the physics; a divergence resets the state and sets :attr:`diverged`."""
+        self.diverged = False
+        try:
+            super().step(nstep)
+        except control.PhysicsError as err:
+            self.diverged = True
+            self.instabilities += 1
+            log.warning("physics diverged (%s); the episode ends", err)
+            mujoco.mj_resetData(self.model.ptr, self.data.ptr)
+            mujoco.mj_forward(self.model.ptr, self.data.ptr)
+
+    # ----- rendering --------------------------------------------------------------------
+    def render_camera(self, height: int, width: int, supersample: int = 1,
+                      camera: str = C.CAMERA) -> np.ndarray:
+        """RGB uint8 image (height, width, 3) from ``camera``, rendered ``supersample`` times
+        larger per axis and box-averaged down. One renderer per size is kept and reused."""
+        size = (height * supersample, width * supersample)
+        renderer = self._renderers.get(size)
+        if renderer is None:
+            renderer = mujoco.Renderer(self.model.ptr, *size)
+            self._renderers[size] = renderer
+        renderer.update_scene(self.data.ptr, camera=camera)
+        image = renderer.render()
+        if supersample == 1:
+            return image.copy()
+        blocks = image.reshape(height, supersample, width, supersample, 3)
+        return (blocks.mean(axis=(1, 3), dtype=np.float32) + 0.5).astype(np.uint8)
+
+    def free_renderers(self) -> None:
+        """Release the GL contexts of the kept renderers."""
+        for renderer in self._renderers.values():
+            renderer.close()
+        self._renderers.clear()
