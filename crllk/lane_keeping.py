@@ -25,7 +25,9 @@ from crllk.sim.physics import Physics, check_points
 from crllk.task_config import TaskConfig, load_task_config
 
 OBSERVATIONS = ("pixels", "state")
-ACTIONS = ("discrete", "continuous")
+ACTIONS = ("discrete", "continuous", "duty")
+"""Action types: 3 discrete duty pairs, (velocity, steering) through the Duckietown inverse
+kinematics, or raw wheel duty cycles (left, right) in [-1, 1]."""
 
 _CURVATURE_LOOKAHEAD = (0.15, 0.3, 0.6)
 """Distances ahead (m) at which the state observation reports lane curvature."""
@@ -126,8 +128,10 @@ class LaneKeeping(base.Task):
     def before_step(self, action, physics: Physics) -> None:
         if self.action_type == "discrete":
             duty = discrete_to_duty(np.asarray(action).item())
-        else:
+        elif self.action_type == "continuous":
             duty = velocity_steering_to_duty(np.asarray(action, dtype=np.float64).reshape(2))
+        else:
+            duty = np.clip(np.asarray(action, dtype=np.float64).reshape(2), -1.0, 1.0)
         self._history = np.roll(self._history, 1, axis=0)
         self._history[0] = duty
         self._previous_pose = physics.pose()
@@ -222,7 +226,8 @@ def load(task: str | Path, *, observation: str = "pixels", action: str = "discre
         task: a task name (``small_loop``, ``zigzag``, ``obstacle_loop``) or the path of a task
             or Duckietown map file.
         observation: ``"pixels"`` (camera, uint8 HxWx3) or ``"state"`` (lane-relative features).
-        action: ``"discrete"`` (3 duty pairs) or ``"continuous"`` ((velocity, steering)).
+        action: ``"discrete"`` (3 duty pairs), ``"continuous"`` ((velocity, steering)) or
+            ``"duty"`` (wheel duty cycles (left, right)).
         seed: seeds the spawn.
         overrides: task settings to replace, e.g. ``{"horizon": 64}``.
     """

@@ -20,7 +20,6 @@ from crllk.sim import constants as C
 from crllk.sim.texture import texture_png
 from crllk.task_config import MotorConfig
 
-_TEXTURE_FILE = "map_texture.png"
 _SCENE_MARGIN = 1.0
 """Ground visible beyond the map's edge (m)."""
 _OVERHEAD_HEIGHT = 6.0
@@ -61,10 +60,14 @@ def export_scene(dmap: DuckietownMap, directory: str | Path) -> Path:
     directory.mkdir(parents=True, exist_ok=True)
     spec = build_spec(dmap)
     spec.compile()
-    (directory / _TEXTURE_FILE).write_bytes(texture_png(dmap))
+    (directory / _texture_file(dmap)).write_bytes(texture_png(dmap))
     path = directory / f"{dmap.name}.xml"
     path.write_text(spec.to_xml())
     return path
+
+
+def _texture_file(dmap: DuckietownMap) -> str:
+    return f"{dmap.name}_texture.png"
 
 
 def _set_visual(spec: mujoco.MjSpec, dmap: DuckietownMap) -> None:
@@ -83,8 +86,12 @@ def _set_visual(spec: mujoco.MjSpec, dmap: DuckietownMap) -> None:
 
 
 def _add_floor(spec: mujoco.MjSpec, dmap: DuckietownMap) -> None:
-    spec.assets = {_TEXTURE_FILE: texture_png(dmap)}
-    spec.add_texture(name="map", type=mujoco.mjtTexture.mjTEXTURE_2D, file=_TEXTURE_FILE)
+    texture_file = _texture_file(dmap)
+    spec.assets = {texture_file: texture_png(dmap)}
+    spec.add_texture(name="sky", type=mujoco.mjtTexture.mjTEXTURE_SKYBOX,
+                     builtin=mujoco.mjtBuiltin.mjBUILTIN_GRADIENT, rgb1=[0.62, 0.72, 0.82],
+                     rgb2=[0.85, 0.85, 0.85], width=64, height=64)
+    spec.add_texture(name="map", type=mujoco.mjtTexture.mjTEXTURE_2D, file=texture_file)
     material = spec.add_material(name="map", rgba=[1, 1, 1, 1], specular=0.0, shininess=0.0)
     material.textures[mujoco.mjtTextureRole.mjTEXROLE_RGB] = "map"
     material.texrepeat = [1, 1]

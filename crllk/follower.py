@@ -1,0 +1,78 @@
+"""A scripted lane follower with privileged access to the lane pose.
+
+It is the sanity check of the geometry and the physics, and an upper-bound baseline. It predicts
+where the robot will be once the motor delay has passed, measures that pose against the lane
+and commands a yaw rate from curvature feed-forward plus heading and lateral feedback:
+
+    w = v * kappa - k_heading * e_heading + k_lateral * v * e_lateral
+
+then turns (v, w) into wheel duty cycles through the DB18 steady-state gains.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from crllk.maps import DuckietownMap
+from crllk.sim.physics import Physics
+from crllk.task_config import MotorConfig
+
+
+@dataclass(frozen=True)
+class FollowerGains:
+    """Gains and speeds of the lane follower."""
+
+    cruise_speed: float = 0.25
+    """Forward speed on straights (m/s)."""
+    max_lateral_acceleration: float = 0.18
+    """Speed in curves is limited to sqrt(a / |kappa|) (m/s^2)."""
+    heading_gain: float = 5.0
+    """Yaw rate per radian of heading error (1/s)."""
+    lateral_gain: float = 25.0
+    """Yaw rate per metre of lateral offset per m/s of speed (1/m^2)."""
+    prediction_time: float = 0.1
+    """Look this far beyond the motor delay when predicting the pose (s)."""
+
+
+class LaneFollower:
+    """Drives a robot along its lane from the true pose (privileged)."""
+
+    def __init__(self, dmap: DuckietownMap, motor: MotorConfig,
+                 gains: FollowerGains | None = None) -> None:
+        self.map = dmap
+        self.motor = motor
+        self.gains = gains or FollowerGains()
+
+    def duty(self, physics: Physics) -> np.ndarray:
+        """Wheel duty cycles (left, right) for the robot's current state."""
+        g = self.gains
+        x, y, yaw = physics.pose()
+        speed, yaw_rate = physics.forward_speed(), physics.yaw_rate()
+        horizon = self.motor.delay + g.prediction_time
+        x, y, yaw = _predict(x, y, yaw, speed, yaw_rate, horizon)
+        pose = self.map.lane_pose(x, y, yaw)
+        curvature = max((abs(k) for k in self.map.curvature_ahead(pose, (0.0, 0.1))),
+                        default=0.0)
+        target_speed = g.cruise_speed
+        if curvature > 0:
+            target_speed = min(target_speed, math.sqrt(g.max_lateral_acceleration / curvature))
+        lane_curvature = self.map.curvature_ahead(pose, (0.0,))[0]
+        yaw_rate_command = (target_speed * lane_curvature - g.heading_gain * pose.heading_error
+                            + g.lateral_gain * target_speed * pose.lateral)
+        mean = target_speed / self.motor.max_speed
+        difference = yaw_rate_command / self.motor.yaw_rate_per_duty
+        return np.clip([mean - difference / 2, mean + difference / 2], -1.0, 1.0)
+
+
+def _predict(x: float, y: float, yaw: float, speed: float, yaw_rate: float,
+             horizon: float) -> tuple[float, float, float]:
+    """Pose after ``horizon`` s at constant speed and yaw rate (unicycle arc)."""
+    new_yaw = yaw + yaw_rate * horizon
+    if abs(yaw_rate) < 1e-6:
+        return x + speed * horizon * math.cos(yaw), y + speed * horizon * math.sin(yaw), new_yaw
+    radius = speed / yaw_rate
+    return (x + radius * (math.sin(new_yaw) - math.sin(yaw)),
+            y - radius * (math.cos(new_yaw) - math.cos(yaw)), new_yaw)
