@@ -12,8 +12,8 @@ import os
 os.environ.setdefault("MUJOCO_GL", "egl")
 os.environ.setdefault("PYOPENGL_PLATFORM", os.environ["MUJOCO_GL"])
 
-from crllk import maps  # noqa: E402
-from crllk.lane_keeping import load  # noqa: E402
+from crllk import maps
+from crllk.lane_keeping import load
 
 __all__ = ["load", "maps"]
 __version__ = "0.1.0"

@@ -132,7 +132,7 @@ class LaneKeeping(base.Task):
             duty = velocity_steering_to_duty(np.asarray(action, dtype=np.float64).reshape(2))
         else:
             duty = np.clip(np.asarray(action, dtype=np.float64).reshape(2), -1.0, 1.0)
-        self._history = np.roll(self._history, 1, axis=0)
+        self._history[1:] = self._history[:-1]
         self._history[0] = duty
         self._previous_pose = physics.pose()
         physics.set_wheel_duty(duty)
@@ -140,13 +140,13 @@ class LaneKeeping(base.Task):
     def after_step(self, physics: Physics) -> None:
         x, y, yaw = physics.pose()
         pose = self.map.lane_pose(x, y, yaw)
-        px, py, pyaw = self._previous_pose
-        heading = self.map.lane_pose(px, py, pyaw).lane.project(px, py).heading
+        px, py, _ = self._previous_pose
+        heading = self._outcome.lane_pose.lane.project(px, py).heading
         progress = (x - px) * math.cos(heading) + (y - py) * math.sin(heading)
         termination = None
         if physics.diverged:
             termination, progress = "unstable", 0.0
-        elif not all(self.map.is_road(cx, cy) for cx, cy in physics.footprint_check_points()):
+        elif not all(self.map.is_road(cx, cy) for cx, cy in check_points(x, y, yaw)):
             termination = "off_road"
         elif physics.touches_obstacle():
             termination = "collision"

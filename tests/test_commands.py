@@ -28,3 +28,13 @@ def test_pictures_command_writes_each_requested_map(tmp_path):
     written = sorted(p.name for p in tmp_path.glob("*.png"))
     assert written == [f"obstacle_loop_{s}.png"
                        for s in ("camera", "camera_full", "chase", "topdown")]
+
+
+def test_bench_prints_each_figure_with_its_bound(capsys):
+    """`python -m crllk.bench` at a tiny budget prints the four figures and two ratios."""
+    from crllk import bench
+
+    bench.main(["--steps", "20"])
+    printed = capsys.readouterr().out
+    assert "raw MuJoCo physics" in printed and "env, pixel observations" in printed
+    assert printed.count("met") + printed.count("MISSED") == 2

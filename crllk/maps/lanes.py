@@ -92,7 +92,7 @@ class Lane:
 
 
 def build_lane(column: int, row: int, rows: int, tile_size: float, entry: str, exit_: str) -> Lane:
-    """The lane of tile (column, row) that enters through edge ``entry`` and leaves via ``exit_``."""
+    """The lane of tile (column, row) entering through edge ``entry``, leaving via ``exit_``."""
     s = tile_size
     tile_cx, tile_cy = (column + 0.5) * s, (rows - 1 - row + 0.5) * s
     heading_in = OPPOSITE[entry]

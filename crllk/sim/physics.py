@@ -19,15 +19,17 @@ from crllk.task_config import MotorConfig
 log = logging.getLogger(__name__)
 
 
-def check_points(x: float, y: float, yaw: float) -> np.ndarray:
+def check_points(x: float, y: float, yaw: float) -> list[tuple[float, float]]:
     """World (x, y) of the footprint's centre, left, right and front points for an axle pose
-    (x, y, yaw); shape (4, 2). All four must lie on road tiles."""
+    (x, y, yaw). All four must lie on road tiles."""
     c, s = math.cos(yaw), math.sin(yaw)
-    back = -C.FOOTPRINT_CENTRE_BEHIND_AXLE
-    local = np.array([[back, 0.0], [back, C.FOOTPRINT_WIDTH / 2],
-                      [back, -C.FOOTPRINT_WIDTH / 2], [back + C.FOOTPRINT_LENGTH / 2, 0.0]])
-    return np.column_stack([x + c * local[:, 0] - s * local[:, 1],
-                            y + s * local[:, 0] + c * local[:, 1]])
+    return [(x + c * u - s * v, y + s * u + c * v) for u, v in _CHECK_POINTS_LOCAL]
+
+
+_BACK = -C.FOOTPRINT_CENTRE_BEHIND_AXLE
+_CHECK_POINTS_LOCAL = ((_BACK, 0.0), (_BACK, C.FOOTPRINT_WIDTH / 2),
+                       (_BACK, -C.FOOTPRINT_WIDTH / 2), (_BACK + C.FOOTPRINT_LENGTH / 2, 0.0))
+"""Footprint check points in the body frame (m): centre, left, right, front."""
 
 
 class Physics(dm_mujoco.Physics):
@@ -58,17 +60,15 @@ class Physics(dm_mujoco.Physics):
     # ----- state accessors --------------------------------------------------------------
     def pose(self) -> tuple[float, float, float]:
         """Axle-centre position x, y (m) and yaw (rad, CCW from +x)."""
-        q = self.data.qpos
         a = self._root_qpos
-        w, x, y, z = q[a + 3:a + 7]
-        yaw = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
-        return float(q[a]), float(q[a + 1]), yaw
+        px, py, _, w, x, y, z = self.data.qpos[a:a + 7].tolist()
+        return px, py, math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
 
     def forward_speed(self) -> float:
         """Speed along the robot's heading (m/s)."""
         _, _, yaw = self.pose()
-        v = self.data.qvel[self._root_qvel:self._root_qvel + 2]
-        return float(v[0] * math.cos(yaw) + v[1] * math.sin(yaw))
+        vx, vy = self.data.qvel[self._root_qvel:self._root_qvel + 2].tolist()
+        return vx * math.cos(yaw) + vy * math.sin(yaw)
 
     def yaw_rate(self) -> float:
         """Angular velocity about the vertical axis (rad/s)."""
@@ -79,8 +79,8 @@ class Physics(dm_mujoco.Physics):
         return np.array([self.named.data.qvel[C.LEFT_WHEEL_JOINT][0],
                          self.named.data.qvel[C.RIGHT_WHEEL_JOINT][0]])
 
-    def footprint_check_points(self) -> np.ndarray:
-        """World (x, y) of the footprint's centre, left, right and front points, shape (4, 2)."""
+    def footprint_check_points(self) -> list[tuple[float, float]]:
+        """World (x, y) of the footprint's centre, left, right and front points."""
         return check_points(*self.pose())
 
     def touches_obstacle(self) -> bool:
