@@ -91,6 +91,17 @@ class LaneKeeping(base.Task):
             return specs.DiscreteArray(num_values=3, dtype=np.int64, name="action")
         return specs.BoundedArray((2,), np.float64, -1.0, 1.0, name="action")
 
+    def observation_spec(self, physics: Physics) -> dict[str, specs.Array]:
+        # Explicit, so the spec is available before the first reset (dm_env users ask first).
+        if self.observation_type == "pixels":
+            cam = self.config.camera
+            main = specs.Array((cam.height, cam.width, 3), np.uint8, name="pixels")
+        else:
+            main = specs.Array((len(state_feature_names(self.config)),), np.float64, name="state")
+        return {main.name: main,
+                "cost_lane": specs.Array((), np.float64, name="cost_lane"),
+                "cost_collision": specs.Array((), np.float64, name="cost_collision")}
+
     # ----- episode ----------------------------------------------------------------------
     def initialize_episode(self, physics: Physics) -> None:
         x, y, yaw = self._spawn_pose()
@@ -132,6 +143,8 @@ class LaneKeeping(base.Task):
             duty = velocity_steering_to_duty(np.asarray(action, dtype=np.float64).reshape(2))
         else:
             duty = np.clip(np.asarray(action, dtype=np.float64).reshape(2), -1.0, 1.0)
+        if not np.all(np.isfinite(duty)):
+            raise ValueError(f"action {action!r} is not finite")
         self._history[1:] = self._history[:-1]
         self._history[0] = duty
         self._previous_pose = physics.pose()

@@ -166,7 +166,7 @@ def _parse_object(
     if not isinstance(raw, Mapping):
         raise MapError(source, field, "expected a mapping with kind and pos")
     kind = raw.get("kind")
-    if kind not in OBJECT_SIZES:
+    if not isinstance(kind, str) or kind not in OBJECT_SIZES:
         raise MapError(
             source, f"{field}.kind",
             f"unknown object kind {kind!r} (known: {', '.join(OBJECT_SIZES)})",
@@ -182,7 +182,8 @@ def _parse_object(
             f"{[px, pz]} is off the map (x in [0, {columns}], z in [0, {rows}] tile units)",
         )
     rotate = raw.get("rotate", 0.0)
-    if isinstance(rotate, bool) or not isinstance(rotate, int | float):
+    if (isinstance(rotate, bool) or not isinstance(rotate, int | float)
+            or not math.isfinite(rotate)):
         raise MapError(source, f"{field}.rotate", f"expected degrees, got {rotate!r}")
     length, width, height = OBJECT_SIZES[kind]
     if "height" in raw:

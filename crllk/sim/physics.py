@@ -42,6 +42,12 @@ class Physics(dm_mujoco.Physics):
         physics.motor = motor or MotorConfig()
         return physics
 
+    def copy(self, share_model: bool = False) -> Physics:
+        """A copy of the physics that keeps the motor settings (dm_control's copy drops them)."""
+        new = super().copy(share_model=share_model)
+        new.motor = self.motor
+        return new
+
     def _reload_from_data(self, data) -> None:
         super()._reload_from_data(data)
         self.motor = MotorConfig()
