@@ -1,0 +1,360 @@
+"""Numeric and key-remap tests of the Lagrangian PPO loss and its GAE helper."""
+
+from __future__ import annotations
+
+import contextlib
+from collections.abc import Iterator
+
+import pytest
+import torch
+from tensordict import TensorDict
+from tensordict.nn import NormalParamExtractor, TensorDictModule
+from torch import nn
+from torch.distributions import Categorical
+from torchrl.modules import MLP, ProbabilisticActor, TanhNormal, ValueOperator
+from torchrl.objectives import ClipPPOLoss
+
+from crllk.loss import LagrangianPPOLoss, make_advantage_modules
+
+_OBS_DIM = 4
+_N_ACTIONS = 3
+_BATCH = 32
+_HIDDEN = 16
+_COSTS = ("lane", "collision")
+_LOSS_KEYS = ("loss_objective", "loss_critic", "loss_cost_critic", "loss_entropy")
+
+
+@contextlib.contextmanager
+def _seeded(seed: int) -> Iterator[None]:
+    """Seeds torch inside the block only; the global generator is restored afterwards."""
+    with torch.random.fork_rng():
+        torch.manual_seed(seed)
+        yield
+
+
+def _mlp(out_features: int) -> nn.Module:
+    return MLP(in_features=_OBS_DIM, out_features=out_features, num_cells=[_HIDDEN])
+
+
+def _critic(out_key: str) -> ValueOperator:
+    return ValueOperator(_mlp(1), in_keys=["observation"], out_keys=[out_key])
+
+
+def _categorical_actor() -> ProbabilisticActor:
+    logits = TensorDictModule(_mlp(_N_ACTIONS), in_keys=["observation"], out_keys=["logits"])
+    return ProbabilisticActor(
+        logits, in_keys=["logits"], distribution_class=Categorical, return_log_prob=True
+    )
+
+
+def _tanh_normal_actor(action_dim: int) -> ProbabilisticActor:
+    params = TensorDictModule(
+        nn.Sequential(_mlp(2 * action_dim), NormalParamExtractor()),
+        in_keys=["observation"],
+        out_keys=["loc", "scale"],
+    )
+    return ProbabilisticActor(
+        params, in_keys=["loc", "scale"], distribution_class=TanhNormal, return_log_prob=True
+    )
+
+
+def _networks(actor_factory=_categorical_actor, seed: int = 0):
+    """(actor, reward critic, {cost: critic}), initialised under a fixed seed."""
+    with _seeded(seed):
+        actor = actor_factory()
+        critic = _critic("state_value")
+        cost_critics = {name: _critic(f"state_value_{name}") for name in _COSTS}
+    return actor, critic, cost_critics
+
+
+def _batch(actor: ProbabilisticActor, actions: torch.Tensor, g: torch.Generator) -> TensorDict:
+    """A batch of 32 transitions: the actor's log-probs perturbed so that some ratios clip,
+    random advantages and value targets for the reward and both costs."""
+    td = TensorDict({"observation": torch.randn(_BATCH, _OBS_DIM, generator=g)}, [_BATCH])
+    td["action"] = actions
+    with torch.no_grad():
+        log_prob = actor.get_dist(td).log_prob(actions)
+    td["action_log_prob"] = log_prob + 0.3 * torch.randn(_BATCH, generator=g)
+    for suffix in ("", *(f"_{name}" for name in _COSTS)):
+        td[f"advantage{suffix}"] = torch.randn(_BATCH, 1, generator=g)
+        td[f"value_target{suffix}"] = torch.randn(_BATCH, 1, generator=g)
+    return td
+
+
+def _categorical_batch(actor: ProbabilisticActor, seed: int = 1) -> TensorDict:
+    g = torch.Generator().manual_seed(seed)
+    return _batch(actor, torch.randint(0, _N_ACTIONS, (_BATCH,), generator=g), g)
+
+
+def _loss(lagrange=(0.0, 0.0), **kwargs) -> tuple[LagrangianPPOLoss, TensorDict]:
+    actor, critic, cost_critics = _networks()
+    loss = LagrangianPPOLoss(actor, critic, cost_critics, lagrange=lagrange, **kwargs)
+    return loss, _categorical_batch(actor)
+
+
+# ---------------------------------------------------------------------- (a) λ = 0 is PPO
+
+
+@pytest.mark.parametrize("normalize", [False, True])
+def test_zero_multipliers_match_torchrl_clip_ppo(normalize):
+    loss, td = _loss(normalize_advantage=normalize)
+    reference = ClipPPOLoss(
+        loss.actor_network,
+        loss.critic_network,
+        clip_epsilon=0.2,
+        entropy_coeff=0.01,
+        critic_coeff=1.0,
+        loss_critic_type="l2",  # (V − G)², as ours
+        normalize_advantage=normalize,
+    )
+    ours, theirs = loss(td), reference(td)
+    assert 0.0 < theirs["clip_fraction"] < 1.0  # the clip is exercised on this batch
+    for key in ("loss_objective", "loss_entropy", "entropy", "clip_fraction", "loss_critic"):
+        torch.testing.assert_close(ours[key], theirs[key], msg=key)
+
+
+def test_input_batch_is_not_modified():
+    loss, td = _loss()
+    keys_before = set(td.keys(include_nested=True))
+    loss(td)
+    assert set(td.keys(include_nested=True)) == keys_before
+
+
+# ------------------------------------------------------- (b) λ lowers the objective as computed
+
+
+def _unit_ratio_batch(loss: LagrangianPPOLoss) -> TensorDict:
+    """A_r = 1 everywhere; A_lane = 3 on the first half, 0 on the second; A_collision = 0.5.
+    The stored log-probs are the current ones, so every ratio ρ is exactly 1."""
+    td = _categorical_batch(loss.actor_network)
+    with torch.no_grad():
+        td["action_log_prob"] = loss.actor_network.get_dist(td).log_prob(td["action"])
+    half = _BATCH // 2
+    td["advantage"] = torch.ones(_BATCH, 1)
+    td["advantage_lane"] = torch.cat([torch.full((half, 1), 3.0), torch.zeros(half, 1)])
+    td["advantage_collision"] = torch.full((_BATCH, 1), 0.5)
+    return td
+
+
+@pytest.mark.parametrize(
+    ("lagrange", "high_cost", "no_cost"),
+    [
+        # A = (A_r − λ_lane·A_lane − λ_coll·A_coll) / (1 + λ_lane + λ_coll)
+        ((0.0, 0.0), 1.0, 1.0),  # (1 − 0 − 0) / 1
+        ((2.0, 0.0), -5.0 / 3.0, 1.0 / 3.0),  # (1 − 6) / 3 and (1 − 0) / 3
+        ((2.0, 1.0), -1.375, 0.125),  # (1 − 6 − 0.5) / 4 and (1 − 0 − 0.5) / 4
+    ],
+)
+def test_combined_advantage_follows_the_formula(lagrange, high_cost, no_cost):
+    loss, _ = _loss(lagrange=lagrange)
+    td = _unit_ratio_batch(loss)
+    half = _BATCH // 2
+    expected = torch.tensor([[high_cost]] * half + [[no_cost]] * half)
+    torch.testing.assert_close(loss.combined_advantage(td), expected)
+    # With ρ = 1 no sample is clipped and the surrogate is mean(ρ·A) = mean(A):
+    out = loss(td)
+    assert out["clip_fraction"] == 0.0
+    torch.testing.assert_close(out["loss_objective"], -expected.mean())
+
+
+def test_a_larger_lane_multiplier_lowers_the_objective():
+    # λ = 0: loss_objective = −mean(A_r) = −1
+    # λ_lane = 2: loss_objective = −mean(−5/3 on 16 samples, 1/3 on 16) = −(−4/3)/2 = 2/3
+    # i.e. the surrogate objective falls from 1 to −2/3, driven by the high-lane-cost samples,
+    # whose advantage turns from +1 to −5/3 (their actions become less likely).
+    loss, _ = _loss()
+    td = _unit_ratio_batch(loss)
+    objectives = []
+    for lane in (0.0, 0.5, 2.0, 10.0):
+        loss.set_multipliers({"lane": lane, "collision": 0.0})
+        objectives.append(loss(td)["loss_objective"].item())
+    assert objectives[0] == pytest.approx(-1.0)
+    assert objectives[2] == pytest.approx(2.0 / 3.0)
+    assert objectives == sorted(objectives)  # the loss rises (objective falls) with λ_lane
+
+
+# ---------------------------------------------------------------------------- (c) gradients
+
+
+def _has_gradient(module: nn.Module) -> bool:
+    return any(p.grad is not None and p.grad.abs().sum() > 0 for p in module.parameters())
+
+
+def test_gradients_reach_every_network():
+    loss, td = _loss(lagrange=(1.0, 0.5))
+    out = loss(td)
+    sum(out[key] for key in _LOSS_KEYS).backward()
+    assert _has_gradient(loss.actor_network)
+    assert _has_gradient(loss.critic_network)
+    for name in _COSTS:
+        assert _has_gradient(loss.cost_critics[name]), name
+
+
+def test_objective_reaches_only_the_actor():
+    loss, td = _loss(lagrange=(1.0, 0.5))
+    loss(td)["loss_objective"].backward()
+    assert _has_gradient(loss.actor_network)
+    assert not _has_gradient(loss.critic_network)
+    assert not any(_has_gradient(critic) for critic in loss.cost_critics.values())
+
+
+def test_diagnostics_are_detached_and_named():
+    loss, td = _loss(lagrange=(1.0, 0.5))
+    out = loss(td)
+    assert set(out.keys()) == set(loss.out_keys)
+    for key in ("entropy", "kl_approx", "clip_fraction", "explained_variance",
+                "explained_variance_lane", "explained_variance_collision"):
+        assert not out[key].requires_grad, key
+    assert out["kl_approx"] >= 0.0  # (ρ − 1) − log ρ >= 0
+
+
+# ------------------------------------------------------------------------- (d) key remapping
+
+
+def test_set_keys_remaps_what_the_loss_reads():
+    loss, td = _loss(lagrange=(2.0, 1.0))
+    expected = loss(td)
+    renamed = td.clone()
+    renamed["adv_reward"] = renamed.pop("advantage")
+    renamed["costs", "lane", "advantage"] = renamed.pop("advantage_lane")
+    loss.set_keys(advantage="adv_reward", advantage_lane=("costs", "lane", "advantage"))
+    assert loss.cost_keys("lane")[0] == ("costs", "lane", "advantage")
+    out = loss(renamed)
+    for key in _LOSS_KEYS:
+        torch.testing.assert_close(out[key], expected[key], msg=key)
+    with pytest.raises(KeyError, match="adv_reward"):
+        loss(td)  # the old names are no longer read
+
+
+def test_unknown_key_names_and_shared_value_keys_raise():
+    loss, _ = _loss()
+    with pytest.raises(ValueError, match="not an accepted tensordict key"):
+        loss.set_keys(advantage_speed="advantage_speed")
+    actor, critic, _ = _networks()
+    with pytest.raises(ValueError, match="its own value key"):
+        LagrangianPPOLoss(actor, critic, {"lane": _critic("state_value")})
+
+
+def test_set_multipliers_validates():
+    loss, _ = _loss()
+    loss.set_multipliers(torch.tensor([0.5, 4.0]))
+    assert loss.multipliers == {"lane": 0.5, "collision": 4.0}
+    assert torch.equal(loss.state_dict()["lagrange"], torch.tensor([0.5, 4.0]))
+    with pytest.raises(ValueError, match="expected 2 multipliers"):
+        loss.set_multipliers([1.0])
+    with pytest.raises(ValueError, match="finite and >= 0"):
+        loss.set_multipliers([1.0, -0.1])
+    with pytest.raises(ValueError, match="must name"):
+        loss.set_multipliers({"lane": 1.0})
+
+
+# ---------------------------------------------------------------------- (e) the GAE helper
+
+
+def _fixed_linear_critic(out_key: str, slope: float) -> ValueOperator:
+    """V(s) = slope · s for a one-dimensional observation s."""
+    linear = nn.Linear(1, 1)
+    with torch.no_grad():
+        linear.weight.fill_(slope)
+        linear.bias.zero_()
+    return ValueOperator(linear, in_keys=["observation"], out_keys=[out_key])
+
+
+def _toy_trajectory() -> TensorDict:
+    """Five steps, s = 1.0, 0.8, ..., 0.2 → s' = 0.8, ..., 0.0, terminated at the last step."""
+    obs = torch.tensor([[1.0], [0.8], [0.6], [0.4], [0.2]])
+    end = torch.tensor([[False]] * 4 + [[True]])
+    return TensorDict(
+        {
+            "observation": obs,
+            "next": {
+                "observation": obs - 0.2,
+                "reward": torch.ones(5, 1),
+                "cost_lane": torch.tensor([[0.5], [1.0], [0.0], [2.0], [1.0]]),
+                "cost_collision": torch.zeros(5, 1),
+                "done": end,
+                "terminated": end,
+            },
+        },
+        [5],
+    )
+
+
+def test_gae_helper_matches_a_manual_computation():
+    critic = _fixed_linear_critic("state_value", slope=2.0)
+    cost_critics = {
+        "lane": _fixed_linear_critic("state_value_lane", slope=1.0),
+        "collision": _fixed_linear_critic("state_value_collision", slope=0.0),
+    }
+    modules = make_advantage_modules(0.95, 0.95, critic, cost_critics)
+    td = modules(_toy_trajectory())
+    # Lane: V(s) = s, γ = λ = 0.95, γλ = 0.9025, δ_t = c_t + γ(1 − term_t)V(s'_t) − V(s_t)
+    #   δ_4 = 1.0 + 0 − 0.2          = 0.80   (terminated: no bootstrap)
+    #   δ_3 = 2.0 + 0.95·0.2 − 0.4   = 1.79
+    #   δ_2 = 0.0 + 0.95·0.4 − 0.6   = −0.22
+    #   δ_1 = 1.0 + 0.95·0.6 − 0.8   = 0.77
+    #   δ_0 = 0.5 + 0.95·0.8 − 1.0   = 0.26
+    # A_t = δ_t + 0.9025·A_{t+1}:
+    #   A_4 = 0.8
+    #   A_3 = 1.79 + 0.9025·0.8      = 2.512
+    #   A_2 = −0.22 + 0.9025·2.512   = 2.04708
+    #   A_1 = 0.77 + 0.9025·2.04708  = 2.6174897
+    #   A_0 = 0.26 + 0.9025·2.6174897 = 2.622284454...
+    lane = torch.tensor([[2.6222844], [2.6174897], [2.04708], [2.512], [0.8]])
+    torch.testing.assert_close(td["advantage_lane"], lane)
+    # G_t = A_t + V(s_t)
+    torch.testing.assert_close(td["value_target_lane"], lane + td["observation"])
+    # Collision: zero costs and V = 0, so zero advantage.
+    torch.testing.assert_close(td["advantage_collision"], torch.zeros(5, 1))
+    # Reward: V(s) = 2s, r = 1: δ_4 = 1 − 0.4 = 0.6, δ_3 = 1 + 0.95·0.4 − 0.8 = 0.58
+    #   A_4 = 0.6, A_3 = 0.58 + 0.9025·0.6 = 1.1215
+    torch.testing.assert_close(td["advantage"][3:], torch.tensor([[1.1215], [0.6]]))
+
+
+def test_gae_helper_feeds_the_loss_with_renamed_keys():
+    actor, critic, cost_critics = _networks()
+    loss = LagrangianPPOLoss(actor, critic, cost_critics, lagrange=(1.0, 1.0))
+    loss.set_keys(advantage_lane="adv_lane", value_target_collision="ret_collision")
+    modules = make_advantage_modules(0.95, 0.95, critic, cost_critics, keys=loss.tensor_keys)
+    g = torch.Generator().manual_seed(3)
+    shape = (2, 5)  # two environments, five steps
+    end = torch.zeros(*shape, 1, dtype=torch.bool)
+    td = TensorDict(
+        {
+            "observation": torch.randn(*shape, _OBS_DIM, generator=g),
+            "action": torch.randint(0, _N_ACTIONS, shape, generator=g),
+            "next": {
+                "observation": torch.randn(*shape, _OBS_DIM, generator=g),
+                "reward": torch.rand(*shape, 1, generator=g),
+                "cost_lane": torch.rand(*shape, 1, generator=g),
+                "cost_collision": torch.zeros(*shape, 1),
+                "done": end,
+                "terminated": end,
+            },
+        },
+        shape,
+    )
+    with torch.no_grad():
+        td["action_log_prob"] = actor.get_dist(td).log_prob(td["action"])
+    modules(td)
+    assert {"adv_lane", "ret_collision"} <= set(td.keys())
+    out = loss(td)
+    assert all(torch.isfinite(out[key]) for key in _LOSS_KEYS)
+
+
+# ---------------------------------------------------------------------- (f) continuous actions
+
+
+def test_continuous_actions_give_finite_losses():
+    actor, critic, cost_critics = _networks(lambda: _tanh_normal_actor(action_dim=2))
+    loss = LagrangianPPOLoss(actor, critic, cost_critics, lagrange=(1.0, 4.0))
+    g = torch.Generator().manual_seed(2)
+    actions = torch.rand(_BATCH, 2, generator=g) * 1.8 - 0.9  # inside (−1, 1)
+    td = _batch(actor, actions, g)
+    with _seeded(0):  # TanhNormal has no analytic entropy: a one-sample estimate
+        out = loss(td)
+    for key, value in out.items():
+        assert torch.isfinite(value).all(), key
+    sum(out[key] for key in _LOSS_KEYS).backward()
+    assert _has_gradient(actor)
+    assert all(torch.isfinite(p.grad).all() for p in actor.parameters() if p.grad is not None)
