@@ -111,7 +111,7 @@ def parse_map(data: Any, *, name: str, source: str | Path, field_prefix: str = "
     )
     unknown = set(data) - {"tiles", "tile_size", "objects", "start_tile", "name"}
     if unknown:
-        raise MapError(source, f"{field_prefix}{sorted(unknown)[0]}", "unknown key")
+        raise MapError(source, f"{field_prefix}{sorted(unknown, key=str)[0]}", "unknown key")
     return MapSpec(name=name, source=source, tile_size=tile_size, tiles=tiles, objects=objects)
 
 
