@@ -1,6 +1,7 @@
 """crllk: constrained reinforcement learning for Duckiebot lane keeping in MuJoCo.
 
 ``crllk.load(task, observation=..., action=..., seed=...)`` returns a dm-control environment;
+``crllk.make_env(task, num_envs=N, ...)`` returns one batched TorchRL environment;
 ``crllk.maps.load_map(name_or_path)`` returns a map with its exact lane geometry.
 """
 
@@ -15,5 +16,14 @@ os.environ.setdefault("PYOPENGL_PLATFORM", os.environ["MUJOCO_GL"])
 from crllk import maps
 from crllk.lane_keeping import load
 
-__all__ = ["load", "maps"]
+__all__ = ["load", "make_env", "maps"]
+
+
+def __getattr__(name: str):
+    """``crllk.make_env`` imports TorchRL only when first used."""
+    if name == "make_env":
+        from crllk.envs import make_env
+
+        return make_env
+    raise AttributeError(f"module 'crllk' has no attribute {name!r}")
 __version__ = "0.1.0"

@@ -1,0 +1,222 @@
+"""TorchRL environments over the lane-keeping tasks: many simulations batched in one ``EnvBase``.
+
+``make_env(task, num_envs=N, ...)`` returns a :class:`BatchedLaneKeepingEnv` with batch size
+``[N]``. It owns N (:class:`~crllk.sim.physics.Physics`, :class:`~crllk.lane_keeping.LaneKeeping`)
+pairs built as :func:`crllk.load` builds one (the scene is compiled once and the other physics
+share its ``MjModel``) and drives each through the task hooks directly, skipping dm_control's
+``Environment``. Keys after a step:
+
+- observation: ``"pixels"`` (uint8 ``[N, H, W, 3]``, channels last as the camera delivers them;
+  add ``ToTensorImage`` for channels-first float) or ``"state"`` (float32 ``[N, F]``, entries
+  named by :func:`crllk.lane_keeping.state_feature_names`);
+- reward-like (``[N, 1]`` float32, never in the observation): ``"reward"`` (forward progress
+  along the lane, m), ``"cost_lane"`` (dm) and ``"cost_collision"`` (0 or 1);
+- ``"terminated"`` (the task ended the episode: off road, collision, unstable physics),
+  ``"truncated"`` (the ``horizon`` time limit was reached without termination) and
+  ``"done" = terminated | truncated``, each bool ``[N, 1]``.
+
+Finished sub-environments are reset the TorchRL way: ``reset`` with a ``"_reset"`` mask (as
+``step_and_maybe_reset``, ``rollout`` and the collectors pass it) resets only those.
+
+Per-sub-environment details for evaluation and visualisation stay on the simulations:
+``env.tasks[i].outcome`` (lane pose, costs, termination reason ``'off_road'``, ``'collision'``
+or ``'unstable'``), ``env.physics[i]`` (pose, speeds) and ``env.step_counts[i]``.
+
+Seeding: sub-environment ``i`` draws its spawns from ``np.random.RandomState(s_i)`` where
+``s_i = sub_env_seeds(seed, N)[i]`` (children of ``np.random.SeedSequence(seed)``), so
+``crllk.load(task, seed=s_i, ...)`` reproduces sub-environment ``i`` step for step.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from dm_control.rl import control
+from tensordict import TensorDict, TensorDictBase
+from torchrl.data import Bounded, Categorical, Composite, TensorSpec, Unbounded
+from torchrl.envs import EnvBase
+
+from crllk.lane_keeping import ACTIONS, OBSERVATIONS, LaneKeeping, state_feature_names
+from crllk.sim.physics import Physics
+from crllk.task_config import TaskConfig, load_task_config
+
+COST_KEYS = ("cost_lane", "cost_collision")
+"""Reward-like keys that carry the per-step costs next to ``"reward"``."""
+DONE_KEYS = ("done", "terminated", "truncated")
+
+
+def sub_env_seeds(seed: int | None, num_envs: int) -> list[int]:
+    """The spawn seed of each sub-environment: one 32-bit word from each of ``num_envs``
+    children of ``np.random.SeedSequence(seed)`` (``None``: fresh OS entropy)."""
+    children = np.random.SeedSequence(seed).spawn(num_envs)
+    return [int(child.generate_state(1)[0]) for child in children]
+
+
+class BatchedLaneKeepingEnv(EnvBase):
+    """``num_envs`` lane-keeping simulations stepped in one process behind one ``EnvBase``."""
+
+    def __init__(self, config: TaskConfig, *, num_envs: int = 1, observation: str = "pixels",
+                 action: str = "discrete", seed: int | None = None,
+                 device: torch.device | str = "cpu"):
+        if num_envs < 1:
+            raise ValueError(f"num_envs must be at least 1, got {num_envs}")
+        if observation not in OBSERVATIONS:
+            raise ValueError(f"observation must be one of {OBSERVATIONS}, got {observation!r}")
+        if action not in ACTIONS:
+            raise ValueError(f"action must be one of {ACTIONS}, got {action!r}")
+        super().__init__(device=device, batch_size=torch.Size([num_envs]))
+        self.config = config
+        self.num_envs = num_envs
+        self.observation_type = observation
+        self.action_type = action
+        self.physics = _build_physics(config, num_envs, share_renderers=observation == "pixels")
+        self.tasks = [LaneKeeping(config, observation=observation, action=action, random=0)
+                      for _ in range(num_envs)]
+        self.n_sub_steps = control.compute_n_steps(config.control_timestep,
+                                                   self.physics[0].timestep())
+        self.step_counts = np.zeros(num_envs, dtype=np.int64)
+        """Control steps taken in each sub-environment's current episode."""
+        self.seeds: list[int] = []
+        """The spawn seed of each sub-environment (see :func:`sub_env_seeds`)."""
+        self._observations = np.zeros(self._observation_shape(), self._observation_dtype())
+        self._make_specs()
+        self._set_seed(seed)
+
+    # ----- specs ------------------------------------------------------------------------
+    def _observation_shape(self) -> tuple[int, ...]:
+        if self.observation_type == "pixels":
+            cam = self.config.camera
+            return (self.num_envs, cam.height, cam.width, 3)
+        return (self.num_envs, len(state_feature_names(self.config)))
+
+    def _observation_dtype(self) -> type:
+        return np.uint8 if self.observation_type == "pixels" else np.float32
+
+    def _make_specs(self) -> None:
+        n = self.batch_size
+        shape = self._observation_shape()
+        if self.observation_type == "pixels":
+            obs: TensorSpec = Bounded(0, 255, shape=shape, dtype=torch.uint8, device=self.device)
+        else:
+            obs = Unbounded(shape=shape, dtype=torch.float32, device=self.device)
+        self.observation_spec = Composite({self.observation_type: obs}, shape=n,
+                                          device=self.device)
+        if self.action_type == "discrete":
+            self.action_spec = Categorical(3, shape=n, dtype=torch.int64, device=self.device)
+        else:
+            self.action_spec = Bounded(-1.0, 1.0, shape=(*n, 2), dtype=torch.float32,
+                                       device=self.device)
+        self.reward_spec = Composite(
+            {key: Unbounded(shape=(*n, 1), dtype=torch.float32, device=self.device)
+             for key in ("reward", *COST_KEYS)}, shape=n, device=self.device)
+        self.done_spec = Composite(
+            {key: Categorical(2, shape=(*n, 1), dtype=torch.bool, device=self.device)
+             for key in DONE_KEYS}, shape=n, device=self.device)
+
+    # ----- seeding ----------------------------------------------------------------------
+    def _set_seed(self, seed: int | None) -> None:
+        """Reseed every sub-environment's spawn generator; takes effect at the next reset."""
+        self.seeds = sub_env_seeds(seed, self.num_envs)
+        for task, sub_seed in zip(self.tasks, self.seeds, strict=True):
+            task.random.seed(sub_seed)
+
+    # ----- reset and step ---------------------------------------------------------------
+    def _reset(self, tensordict: TensorDictBase | None = None, **kwargs: Any) -> TensorDictBase:
+        """Reset the sub-environments flagged by ``"_reset"`` (all of them without it)."""
+        mask = None if tensordict is None else tensordict.get("_reset", None)
+        if mask is None:
+            indices: Sequence[int] = range(self.num_envs)
+        else:
+            indices = mask.reshape(self.num_envs).nonzero().flatten().tolist()
+        for i in indices:
+            self._reset_one(i)
+        false = torch.zeros((self.num_envs, 1), dtype=torch.bool)
+        out = {self.observation_type: torch.from_numpy(self._observations.copy()),
+               **{key: false.clone() for key in DONE_KEYS}}
+        return self._tensordict(out)
+
+    def _reset_one(self, i: int) -> None:
+        physics, task = self.physics[i], self.tasks[i]
+        with physics.reset_context():
+            task.initialize_episode(physics)
+        self._observations[i] = task.get_observation(physics)[self.observation_type]
+        self.step_counts[i] = 0
+
+    def _step(self, tensordict: TensorDictBase) -> TensorDictBase:
+        """One control step of every sub-environment."""
+        actions = tensordict.get("action").detach().cpu().numpy()
+        rewards = np.zeros((3, self.num_envs, 1), dtype=np.float32)
+        terminated = np.zeros((self.num_envs, 1), dtype=bool)
+        for i in range(self.num_envs):
+            rewards[:, i, 0], terminated[i, 0] = self._step_one(i, actions[i])
+        self.step_counts += 1
+        truncated = (self.step_counts >= self.config.horizon)[:, None] & ~terminated
+        reward, cost_lane, cost_collision = torch.from_numpy(rewards)  # contiguous [N, 1] each
+        out = {self.observation_type: torch.from_numpy(self._observations.copy()),
+               "reward": reward, "cost_lane": cost_lane, "cost_collision": cost_collision,
+               "terminated": torch.from_numpy(terminated),
+               "truncated": torch.from_numpy(truncated),
+               "done": torch.from_numpy(terminated | truncated)}
+        return self._tensordict(out)
+
+    def _step_one(self, i: int, action: np.ndarray) -> tuple[tuple[float, float, float], bool]:
+        """Step sub-environment ``i``: (reward, cost_lane, cost_collision) and termination."""
+        physics, task = self.physics[i], self.tasks[i]
+        task.before_step(action, physics)
+        physics.step(self.n_sub_steps)
+        task.after_step(physics)
+        reward = task.get_reward(physics)
+        observation = task.get_observation(physics)
+        self._observations[i] = observation[self.observation_type]
+        costs = (observation["cost_lane"], observation["cost_collision"])
+        return (reward, *costs), task.get_termination(physics) is not None
+
+    def _tensordict(self, entries: dict[str, torch.Tensor]) -> TensorDict:
+        out = TensorDict(entries, batch_size=self.batch_size)
+        return out if self.device == torch.device("cpu") else out.to(self.device)
+
+    # ----- teardown ---------------------------------------------------------------------
+    def close(self, *, raise_if_closed: bool = True) -> None:
+        """Release the GL contexts of the camera renderers."""
+        for physics in self.physics:
+            physics.free_renderers()
+        super().close(raise_if_closed=raise_if_closed)
+
+
+def _build_physics(config: TaskConfig, num_envs: int, *, share_renderers: bool) -> list[Physics]:
+    """Compile the scene once; the other physics share its ``MjModel`` (and, for pixels, its
+    camera renderers: one GL context renders every sub-environment's data in turn)."""
+    first = Physics.from_map(config.map, config.motor)
+    copies = [first.copy(share_model=True) for _ in range(num_envs - 1)]
+    if share_renderers:
+        for physics in copies:
+            physics._renderers = first._renderers  # same MjModel: one GL context for all
+    return [first, *copies]
+
+
+def make_env(task: str | Path, *, num_envs: int = 1, observation: str = "pixels",
+             action: str = "discrete", seed: int | None = None,
+             overrides: dict[str, Any] | None = None,
+             device: torch.device | str = "cpu") -> BatchedLaneKeepingEnv:
+    """A TorchRL environment with ``num_envs`` lane-keeping simulations in one process.
+
+    Args:
+        task: a task name or the path of a task or Duckietown map file (as :func:`crllk.load`).
+        num_envs: simulations stepped together; the env's batch size is ``[num_envs]``.
+        observation: ``"pixels"`` (uint8 ``[N, H, W, 3]``) or ``"state"`` (float32 ``[N, F]``).
+        action: ``"discrete"`` (``Categorical(3)``, shape ``[N]``), ``"continuous"``
+            ((velocity, steering) in [-1, 1], shape ``[N, 2]``) or ``"duty"`` (wheel duties).
+        seed: sub-environment ``i`` spawns from ``sub_env_seeds(seed, num_envs)[i]``.
+        overrides: task settings to replace, e.g. ``{"horizon": 64}``.
+        device: where the returned tensors live (simulation runs on the CPU).
+    """
+    config = load_task_config(task, overrides)
+    return BatchedLaneKeepingEnv(config, num_envs=num_envs, observation=observation,
+                                 action=action, seed=seed, device=device)
+
+
+__all__ = ["COST_KEYS", "BatchedLaneKeepingEnv", "make_env", "sub_env_seeds"]
