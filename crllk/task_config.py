@@ -18,6 +18,7 @@ from typing import Any
 from crllk.errors import ConfigError
 from crllk.maps import DuckietownMap, load_map, read_yaml
 from crllk.paths import task_file, task_names
+from crllk.sim.constants import PHYSICS_TIMESTEP
 
 
 @dataclass(frozen=True)
@@ -81,6 +82,9 @@ class TaskConfig:
         return 1.0 / self.control_rate
 
 
+_PHYSICS_RATE = 1.0 / PHYSICS_TIMESTEP
+"""Physics steps per second (Hz)."""
+
 _SECTIONS = {"spawn": SpawnConfig, "motor": MotorConfig, "camera": CameraConfig}
 _SCALARS = ("horizon", "control_rate", "off_road_lane_cost")
 
@@ -126,6 +130,11 @@ def parse_task(settings: Mapping[str, Any], *, name: str, dmap: DuckietownMap,
         raise ConfigError(source, "horizon", f"must be positive, got {config.horizon}")
     if config.control_rate <= 0:
         raise ConfigError(source, "control_rate", f"must be positive, got {config.control_rate}")
+    substeps = _PHYSICS_RATE / config.control_rate
+    if abs(substeps - round(substeps)) > 1e-9:
+        raise ConfigError(source, "control_rate",
+                          f"{config.control_rate:g} Hz does not divide the {_PHYSICS_RATE:g} Hz "
+                          "physics rate (use e.g. 10, 15, 20, 30, 40, 60)")
     return config
 
 

@@ -219,3 +219,13 @@ def test_valid_task_file_with_settings(tmp_path):
     assert config.spawn.lateral_offset == (-0.02, 0.03)
     assert config.spawn.heading_error == (-0.25, 0.25)
     assert config.motor.delay == 0.0 and config.motor.max_speed == 0.6
+
+
+def test_control_rate_must_divide_the_physics_rate():
+    """A control rate that is no whole fraction of 240 Hz is refused naming the field."""
+    from crllk.errors import ConfigError
+    from crllk.task_config import load_task_config
+
+    with pytest.raises(ConfigError, match=r"small_loop\.yaml: control_rate: 7 Hz does not divide"):
+        load_task_config("small_loop", {"control_rate": 7})
+    assert load_task_config("small_loop", {"control_rate": 15}).control_rate == 15
