@@ -1,0 +1,192 @@
+"""Policy and value networks: encoders for camera pixels and lane-relative state, heads on top.
+
+Every network reads one observation key and owns its encoder (no shared trunk), so the actor,
+the reward critic and each cost critic can be trained, checkpointed and exported on their own.
+
+Encoders map an observation to a feature vector:
+
+- ``"fast"`` (pixels, default): three strided convolutions (16, 32, 32 channels) on the 30×40
+  camera image, then a 256-unit layer; about 2 MFLOP per image.
+- ``"original"`` (pixels): the CRLLK paper's network, 3×3 convolutions 32-32-32, max-pool,
+  64-64-64, max-pool, a 2×2 convolution to 128 channels, a 256-unit sigmoid layer; about
+  100 MFLOP per image at 30×40.
+- ``"mlp"`` (state): two tanh layers.
+
+Pixels arrive as uint8 ``[*B, H, W, 3]`` (channels last, as the environment delivers them) and
+are scaled to [0, 1] inside the encoder.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import torch
+from tensordict.nn import TensorDictModule
+from torch import nn
+from torch.distributions import Categorical
+from torchrl.data import TensorSpec
+from torchrl.modules import ProbabilisticActor, TanhNormal, ValueOperator
+
+PIXEL_SCALE = 1.0 / 255.0  # uint8 camera value -> [0, 1]
+ENCODERS = ("fast", "original", "mlp")
+
+
+@dataclass(frozen=True)
+class ModelConfig:
+    """Sizes of the networks.
+
+    Attributes:
+        encoder: ``"fast"`` or ``"original"`` for pixels; state always uses ``"mlp"``.
+        hidden: width of the hidden layers of the state MLP and of the heads.
+        feature_dim: width of the pixel encoder's output layer.
+        initial_log_std: log standard deviation of the continuous actor's first actions
+            (before the tanh squashing).
+    """
+
+    encoder: str = "fast"
+    hidden: int = 64
+    feature_dim: int = 256
+    initial_log_std: float = -0.5
+
+
+class PixelScale(nn.Module):
+    """uint8 ``[*B, H, W, C]`` -> float ``[N, C, H, W]`` in [0, 1], with the batch flattened."""
+
+    def forward(self, pixels: torch.Tensor) -> torch.Tensor:
+        images = pixels.reshape(-1, *pixels.shape[-3:]).permute(0, 3, 1, 2)
+        return images.to(torch.float32) * PIXEL_SCALE
+
+
+class PixelEncoder(nn.Module):
+    """A convolutional encoder on camera images; restores the leading batch dimensions."""
+
+    def __init__(self, trunk: nn.Module, image_shape: Sequence[int]):
+        super().__init__()
+        self.scale = PixelScale()
+        self.trunk = trunk
+        with torch.no_grad():
+            probe = torch.zeros((1, *image_shape), dtype=torch.uint8)
+            self.output_dim = int(self.trunk(self.scale(probe)).shape[-1])
+
+    def forward(self, pixels: torch.Tensor) -> torch.Tensor:
+        features = self.trunk(self.scale(pixels))
+        return features.reshape(*pixels.shape[:-3], features.shape[-1])
+
+
+def fast_pixel_trunk(image_shape: Sequence[int], feature_dim: int) -> nn.Module:
+    """Three stride-2 convolutions and one dense layer (ReLU)."""
+    height, width, channels = image_shape
+    convs = nn.Sequential(
+        nn.Conv2d(channels, 16, kernel_size=5, stride=2, padding=2), nn.ReLU(),
+        nn.Conv2d(16, 32, kernel_size=3, stride=2, padding=1), nn.ReLU(),
+        nn.Conv2d(32, 32, kernel_size=3, stride=2, padding=1), nn.ReLU(),
+        nn.Flatten(),
+    )
+    with torch.no_grad():
+        flat = convs(torch.zeros(1, channels, height, width)).shape[-1]
+    return nn.Sequential(convs, nn.Linear(flat, feature_dim), nn.ReLU())
+
+
+def original_pixel_trunk(image_shape: Sequence[int], feature_dim: int) -> nn.Module:
+    """The CRLLK paper's convolutional network (flattens to 6912 features at 30×40)."""
+    height, width, channels = image_shape
+
+    def conv(c_in: int, c_out: int, kernel: int = 3) -> list[nn.Module]:
+        return [nn.Conv2d(c_in, c_out, kernel_size=kernel, padding="same" if kernel == 3 else 0),
+                nn.ReLU()]
+
+    convs = nn.Sequential(
+        *conv(channels, 32), *conv(32, 32), *conv(32, 32), nn.MaxPool2d(2),
+        *conv(32, 64), *conv(64, 64), *conv(64, 64), nn.MaxPool2d(2),
+        *conv(64, 128, kernel=2), nn.Flatten(),
+    )
+    with torch.no_grad():
+        flat = convs(torch.zeros(1, channels, height, width)).shape[-1]
+    return nn.Sequential(convs, nn.Linear(flat, feature_dim), nn.Sigmoid())
+
+
+def state_encoder(num_features: int, hidden: int) -> nn.Module:
+    """Two tanh layers on the lane-relative state features."""
+    return nn.Sequential(nn.Linear(num_features, hidden), nn.Tanh(),
+                         nn.Linear(hidden, hidden), nn.Tanh())
+
+
+def make_encoder(observation: str, observation_shape: Sequence[int],
+                 config: ModelConfig) -> tuple[nn.Module, int]:
+    """The encoder for one network and the width of its output."""
+    if observation == "state":
+        return state_encoder(observation_shape[-1], config.hidden), config.hidden
+    if observation != "pixels":
+        raise ValueError(f"observation must be 'pixels' or 'state', got {observation!r}")
+    image_shape = tuple(observation_shape[-3:])
+    if config.encoder == "fast":
+        trunk = fast_pixel_trunk(image_shape, config.feature_dim)
+    elif config.encoder == "original":
+        trunk = original_pixel_trunk(image_shape, config.feature_dim)
+    else:
+        raise ValueError(f"pixel encoder must be 'fast' or 'original', got {config.encoder!r}")
+    encoder = PixelEncoder(trunk, image_shape)
+    return encoder, encoder.output_dim
+
+
+def _head(in_dim: int, out_dim: int, *, gain: float) -> nn.Linear:
+    """A linear head with orthogonal weights of the given gain and zero bias."""
+    layer = nn.Linear(in_dim, out_dim)
+    nn.init.orthogonal_(layer.weight, gain=gain)
+    nn.init.zeros_(layer.bias)
+    return layer
+
+
+class GaussianParams(nn.Module):
+    """Action means from a head, with a learned state-independent log standard deviation."""
+
+    def __init__(self, body: nn.Module, action_dim: int, initial_log_std: float):
+        super().__init__()
+        self.body = body
+        self.log_std = nn.Parameter(torch.full((action_dim,), float(initial_log_std)))
+
+    def forward(self, observation: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        loc = self.body(observation)
+        return loc, self.log_std.exp().expand_as(loc)
+
+
+def make_actor(observation: str, observation_shape: Sequence[int], action: str,
+               action_spec: TensorSpec, config: ModelConfig) -> ProbabilisticActor:
+    """The policy: categorical over the three discrete actions, or a tanh-squashed Gaussian
+    over (velocity, steering) in [-1, 1]². Writes ``action`` and ``action_log_prob``."""
+    encoder, width = make_encoder(observation, observation_shape, config)
+    if action == "discrete":
+        num_actions = int(action_spec.space.n)
+        net = nn.Sequential(encoder, _head(width, num_actions, gain=0.01))
+        module = TensorDictModule(net, in_keys=[observation], out_keys=["logits"])
+        return ProbabilisticActor(module, in_keys=["logits"], spec=action_spec,
+                                  distribution_class=Categorical, return_log_prob=True)
+    if action != "continuous":
+        raise ValueError(f"action must be 'discrete' or 'continuous', got {action!r}")
+    action_dim = int(action_spec.shape[-1])
+    net = GaussianParams(nn.Sequential(encoder, _head(width, action_dim, gain=0.01)),
+                         action_dim, config.initial_log_std)
+    module = TensorDictModule(net, in_keys=[observation], out_keys=["loc", "scale"])
+    low, high = action_spec.space.low, action_spec.space.high
+    return ProbabilisticActor(module, in_keys=["loc", "scale"], spec=action_spec,
+                              distribution_class=TanhNormal,
+                              distribution_kwargs={"low": low, "high": high},
+                              return_log_prob=True)
+
+
+def make_critic(observation: str, observation_shape: Sequence[int], config: ModelConfig,
+                out_key: str = "state_value") -> ValueOperator:
+    """A value network reading the observation and writing ``out_key`` (shape [*B, 1])."""
+    encoder, width = make_encoder(observation, observation_shape, config)
+    net = nn.Sequential(encoder, _head(width, 1, gain=1.0))
+    return ValueOperator(net, in_keys=[observation], out_keys=[out_key])
+
+
+def count_parameters(module: nn.Module) -> int:
+    """Number of trainable parameters."""
+    return sum(p.numel() for p in module.parameters() if p.requires_grad)
+
+
+__all__ = ["ENCODERS", "ModelConfig", "count_parameters", "make_actor", "make_critic",
+           "make_encoder"]

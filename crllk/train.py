@@ -1,0 +1,403 @@
+"""``python -m crllk.train task=<name>``: Lagrangian PPO (CRLLK) or fixed-weight PPO on a task.
+
+One iteration of the main loop (:func:`train`):
+
+1. collect ``rollout_steps`` control steps in each of ``num_envs`` simulations;
+2. update the multipliers λ from the episodes that finished (dual ascent, DESIGN.md §5);
+3. compute GAE advantages for the reward and each cost, and run PPO epochs on the combined
+   advantage (A_r − Σλ_i A_ci) / (1 + Σλ_i);
+4. append a row to ``metrics.csv``; every ``checkpoint_every`` iterations (and at the end)
+   write ``checkpoints/last.pt`` atomically; every ``eval.every`` iterations append a
+   deterministic evaluation to ``eval.csv``.
+
+The checkpoint holds the networks, the optimiser, the multipliers, the counters, the random
+generators, the simulations' full state and the running episode sums, so ``resume=true``
+continues exactly where the uninterrupted run would have been.
+"""
+
+from __future__ import annotations
+
+import crllk  # noqa: F401  (chooses the headless GL backend before torchrl imports mujoco)
+
+import csv
+import io
+import math
+import sys
+import time
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import hydra
+import numpy as np
+import torch
+from hydra.core.config_store import ConfigStore
+from omegaconf import DictConfig, OmegaConf
+from tensordict import TensorDictBase
+from torchrl.envs.utils import ExplorationType, set_exploration_type
+from tqdm import tqdm
+
+from crllk.checkpoint import atomic_write_text, load_checkpoint, save_checkpoint
+from crllk.envs import BatchedLaneKeepingEnv, make_env
+from crllk.episodes import EpisodeAccumulator, EpisodeStats, summarise
+from crllk.errors import ConfigError
+from crllk.evaluation import run_episodes
+from crllk.lagrange import Multiplier, make_multiplier
+from crllk.loss import AdvantageModules, LagrangianPPOLoss, make_advantage_modules
+from crllk.maps import read_yaml
+from crllk.models import ModelConfig, make_actor, make_critic
+from crllk.paths import task_file, task_names
+from crllk.train_config import TrainConfig, validate
+
+COSTS = ("lane", "collision")
+"""Constraint names; cost ``c`` is read from ``("next", "cost_<c>")``."""
+DISCRETE_ACTION_NAMES = ("left", "right", "straight")
+RESUME_KEEPS = ("total_frames", "progress", "threads", "checkpoint_every")
+"""Settings a resumed run takes from the command line; all others come from its config.yaml."""
+LOSS_KEYS = ("loss_objective", "loss_critic", "loss_cost_critic", "loss_entropy", "entropy",
+             "kl_approx", "clip_fraction", "explained_variance", "explained_variance_lane",
+             "explained_variance_collision")
+
+
+# ----- building the parts ------------------------------------------------------------------
+@dataclass
+class Learner:
+    """The networks, the loss and the optimiser of one run."""
+
+    actor: torch.nn.Module
+    critics: dict[str, torch.nn.Module]  # "reward" and one per cost
+    loss: LagrangianPPOLoss
+    advantages: AdvantageModules
+    optimizer: torch.optim.Optimizer
+
+
+def build_env(config: TrainConfig, *, num_envs: int, seed: int) -> BatchedLaneKeepingEnv:
+    return make_env(config.task_source(), num_envs=num_envs, observation=config.obs.name,
+                    action=config.action.name, seed=seed, overrides=config.task_overrides())
+
+
+def build_learner(config: TrainConfig, env: BatchedLaneKeepingEnv) -> Learner:
+    obs = config.obs.name
+    shape = env.observation_spec[obs].shape[1:]
+    model = ModelConfig(**vars(config.model))
+    actor = make_actor(obs, shape, config.action.name, env.action_spec, model)
+    critics = {"reward": make_critic(obs, shape, model)}
+    critics |= {c: make_critic(obs, shape, model, out_key=f"state_value_{c}") for c in COSTS}
+    ppo = config.ppo
+    loss = LagrangianPPOLoss(actor, critics["reward"], {c: critics[c] for c in COSTS},
+                             clip_epsilon=ppo.clip_epsilon, entropy_coeff=ppo.entropy_coeff,
+                             critic_coeff=ppo.critic_coeff,
+                             normalize_advantage=ppo.normalize_advantage)
+    advantages = make_advantage_modules(ppo.gamma, ppo.gae_lambda, critics["reward"],
+                                        {c: critics[c] for c in COSTS}, keys=loss.tensor_keys)
+    optimizer = torch.optim.Adam(loss.parameters(), lr=ppo.lr)
+    return Learner(actor, critics, loss, advantages, optimizer)
+
+
+def build_multipliers(config: TrainConfig) -> dict[str, Multiplier]:
+    algo = config.algo
+    multipliers = {}
+    for name in COSTS:
+        c = getattr(algo, name)
+        common = {"threshold": c.threshold, "initial": c.initial, "max_value": c.max_value,
+                  "schedule": algo.schedule, "frozen": algo.frozen}
+        if algo.multiplier == "pid":
+            multipliers[name] = make_multiplier("pid", kp=c.kp, ki=c.step_size, kd=c.kd, **common)
+        else:
+            multipliers[name] = make_multiplier("dual", step_size=c.step_size, **common)
+    return multipliers
+
+
+# ----- one iteration -----------------------------------------------------------------------
+@torch.no_grad()
+def collect(env: BatchedLaneKeepingEnv, actor: torch.nn.Module, carry: TensorDictBase,
+            steps: int) -> tuple[TensorDictBase, TensorDictBase]:
+    """``steps`` control steps of every sub-environment with the stochastic policy; returns
+    the transitions ``[N, steps]`` and the tensordict to continue from."""
+    transitions = []
+    with set_exploration_type(ExplorationType.RANDOM):
+        for _ in range(steps):
+            actor(carry)
+            stepped, carry = env.step_and_maybe_reset(carry)
+            transitions.append(stepped)
+    return torch.stack(transitions, dim=1), carry
+
+
+def ppo_update(learner: Learner, batch: TensorDictBase, config: TrainConfig,
+               generator: torch.Generator) -> dict[str, float]:
+    """GAE for every signal, then ``epochs`` passes of minibatch PPO; mean diagnostics."""
+    batch["next", "reward"] = batch["next", "reward"] * config.reward_scale
+    learner.advantages(batch)
+    flat = batch.reshape(-1)
+    size, sums, count = flat.shape[0], dict.fromkeys(LOSS_KEYS, 0.0), 0
+    groups = [list(learner.actor.parameters())]  # clip each network's gradient on its own,
+    groups += [list(critic.parameters()) for critic in learner.critics.values()]  # so large
+    # value errors do not shrink the policy's step
+    for _ in range(config.ppo.epochs):
+        order = torch.randperm(size, generator=generator)
+        for start in range(0, size, config.ppo.minibatch_size):
+            out = learner.loss(flat[order[start:start + config.ppo.minibatch_size]])
+            total = out["loss_objective"] + out["loss_critic"] + out["loss_cost_critic"] + \
+                out["loss_entropy"]
+            learner.optimizer.zero_grad(set_to_none=True)
+            total.backward()
+            for group in groups:
+                torch.nn.utils.clip_grad_norm_(group, config.ppo.max_grad_norm)
+            learner.optimizer.step()
+            for key in LOSS_KEYS:
+                sums[key] += out[key].item()
+            count += 1
+    return {key: value / count for key, value in sums.items()}
+
+
+def action_columns(batch: TensorDictBase, action: str) -> dict[str, float]:
+    """The iteration's action histogram (discrete) or action statistics (continuous)."""
+    actions = batch["action"]
+    if action == "discrete":
+        counts = torch.bincount(actions.reshape(-1), minlength=len(DISCRETE_ACTION_NAMES))
+        fractions = counts.to(torch.float64) / counts.sum()
+        return {f"action_{name}": float(f) for name, f in zip(DISCRETE_ACTION_NAMES, fractions,
+                                                              strict=True)}
+    flat = actions.reshape(-1, actions.shape[-1]).to(torch.float64)
+    return {"action_velocity_mean": float(flat[:, 0].mean()),
+            "action_steering_mean": float(flat[:, 1].mean()),
+            "action_steering_std": float(flat[:, 1].std())}
+
+
+def update_multipliers(multipliers: dict[str, Multiplier],
+                       episodes: Sequence[EpisodeStats]) -> None:
+    """Dual ascent from the finished episodes: Ĵ_clane is an episode's mean lane cost (dm),
+    Ĵ_coll its number of collisions."""
+    multipliers["lane"].update([e.lane_cost for e in episodes])
+    multipliers["collision"].update([e.collisions for e in episodes])
+
+
+# ----- run directory -----------------------------------------------------------------------
+class CsvLog:
+    """A CSV file with a fixed header, one row appended (and flushed) at a time."""
+
+    def __init__(self, path: Path, columns: Sequence[str]):
+        self.path = path
+        self.columns = list(columns)
+
+    def append(self, row: dict[str, Any]) -> None:
+        new = not self.path.exists()
+        with self.path.open("a", newline="") as handle:
+            writer = csv.DictWriter(handle, fieldnames=self.columns)
+            if new:
+                writer.writeheader()
+            writer.writerow({k: _format(row.get(k, "")) for k in self.columns})
+
+    def truncate_after(self, iteration: int) -> None:
+        """Drops rows of iterations after ``iteration`` (written after the last checkpoint)."""
+        if not self.path.exists():
+            return
+        with self.path.open(newline="") as handle:
+            rows = [r for r in csv.DictReader(handle) if int(r["iteration"]) <= iteration]
+        buffer = io.StringIO()
+        writer = csv.DictWriter(buffer, fieldnames=self.columns, lineterminator="\r\n")
+        writer.writeheader()
+        writer.writerows(rows)
+        atomic_write_text(self.path, buffer.getvalue())
+
+
+def _format(value: Any) -> Any:
+    return f"{value:.6g}" if isinstance(value, float) else value
+
+
+def metric_columns(action: str) -> list[str]:
+    columns = ["iteration", "frames", "time_s", "frames_per_s", "episodes", "J_R", "J_clane",
+               "J_coll", "episode_length", "lambda_lane", "lambda_collision", *LOSS_KEYS]
+    if action == "discrete":
+        return columns + [f"action_{n}" for n in DISCRETE_ACTION_NAMES]
+    return columns + ["action_velocity_mean", "action_steering_mean", "action_steering_std"]
+
+
+EVAL_COLUMNS = ["iteration", "frames", "time_s", "episodes", "J_R", "J_clane", "J_coll",
+                "episode_length", "satisfied"]
+
+
+# ----- the main loop -----------------------------------------------------------------------
+def train(config: TrainConfig) -> Path:
+    """Trains (or resumes) one run; returns its directory."""
+    run_dir = config.resolved_run_dir()
+    checkpoint_path = run_dir / "checkpoints" / "last.pt"
+    resuming = config.resume and checkpoint_path.exists()
+    if not resuming and (run_dir / "metrics.csv").exists():
+        if not config.resume:
+            raise ConfigError(SOURCE_RUN, "run_dir", f"{run_dir} already holds a run; pass "
+                              "resume=true to continue it or choose another run_dir")
+        for stale in ("metrics.csv", "eval.csv"):  # killed before its first checkpoint
+            (run_dir / stale).unlink(missing_ok=True)
+    torch.set_num_threads(config.threads)
+    torch.manual_seed(config.seed)
+    generator = torch.Generator().manual_seed(config.seed)
+
+    env = build_env(config, num_envs=config.num_envs, seed=config.seed)
+    learner = build_learner(config, env)
+    multipliers = build_multipliers(config)
+    episodes = EpisodeAccumulator(config.num_envs)
+    metrics = CsvLog(run_dir / "metrics.csv", metric_columns(config.action.name))
+    evaluations = CsvLog(run_dir / "eval.csv", EVAL_COLUMNS)
+    eval_env = None
+    iteration, frames, elapsed = 0, 0, 0.0
+
+    if resuming:
+        state = load_checkpoint(checkpoint_path)
+        restore(state, learner, multipliers, episodes, env, generator)
+        carry = state["carry"]
+        iteration, frames, elapsed = state["iteration"], state["frames"], state["elapsed"]
+        metrics.truncate_after(iteration)
+        evaluations.truncate_after(iteration)
+        print(f"resuming {run_dir} at iteration {iteration}, {frames} frames", flush=True)
+    else:
+        run_dir.mkdir(parents=True, exist_ok=True)
+        atomic_write_text(run_dir / "config.yaml", OmegaConf.to_yaml(OmegaConf.structured(config)))
+        carry = env.reset()
+        print(f"run directory: {run_dir}", flush=True)
+
+    bar = tqdm(total=config.total_frames, initial=frames, unit="frame", dynamic_ncols=True,
+               disable=not config.progress, file=sys.stderr)
+    started = time.perf_counter() - elapsed
+    while frames < config.total_frames:
+        iteration_start = time.perf_counter()
+        batch, carry = collect(env, learner.actor, carry, config.rollout_steps)
+        finished = episodes.add_batch(batch)
+        update_multipliers(multipliers, finished)
+        learner.loss.set_multipliers([multipliers[c].value for c in COSTS])
+        losses = ppo_update(learner, batch, config, generator)
+        iteration += 1
+        frames += batch.numel()
+
+        summary = summarise(finished)
+        row = {"iteration": iteration, "frames": frames,
+               "time_s": time.perf_counter() - started,
+               "frames_per_s": batch.numel() / (time.perf_counter() - iteration_start),
+               "episodes": summary.episodes, "J_R": summary.J_R, "J_clane": summary.J_clane,
+               "J_coll": summary.J_coll, "episode_length": summary.length,
+               "lambda_lane": multipliers["lane"].value,
+               "lambda_collision": multipliers["collision"].value,
+               **losses, **action_columns(batch, config.action.name)}
+        metrics.append(row)
+        bar.update(batch.numel())
+        bar.set_postfix_str(progress_text(row), refresh=False)
+
+        if config.eval.every and iteration % config.eval.every == 0:
+            if eval_env is None:
+                eval_env = build_env(config, num_envs=config.eval.num_envs, seed=config.eval.seed)
+            evaluations.append(evaluate(config, eval_env, learner, iteration, frames,
+                                        time.perf_counter() - started))
+        if iteration % config.checkpoint_every == 0 or frames >= config.total_frames:
+            save_checkpoint(checkpoint_path, checkpoint_state(
+                config, learner, multipliers, episodes, env, generator, carry,
+                iteration=iteration, frames=frames, elapsed=time.perf_counter() - started))
+    bar.close()
+    env.close()
+    if eval_env is not None:
+        eval_env.close()
+    print(f"done: {frames} frames in {iteration} iterations; run directory: {run_dir}",
+          flush=True)
+    return run_dir
+
+
+SOURCE_RUN = "run"
+
+
+def progress_text(row: dict[str, Any]) -> str:
+    def show(value: float, digits: int) -> str:
+        return "-" if math.isnan(value) else f"{value:.{digits}f}"
+
+    return (f"J_R {show(row['J_R'], 2)} m  J_clane {show(row['J_clane'], 2)} dm  "
+            f"J_coll {show(row['J_coll'], 2)}  λ {row['lambda_lane']:.2f}/"
+            f"{row['lambda_collision']:.2f}")
+
+
+def evaluate(config: TrainConfig, env: BatchedLaneKeepingEnv, learner: Learner, iteration: int,
+             frames: int, time_s: float) -> dict[str, Any]:
+    """Deterministic episodes from the evaluation seed; whether both constraints hold."""
+    env.set_seed(config.eval.seed)
+    summary = run_episodes(env, learner.actor, config.eval.episodes).summary
+    satisfied = (summary.J_clane <= config.algo.lane.threshold
+                 and summary.J_coll <= config.algo.collision.threshold)
+    return {"iteration": iteration, "frames": frames, "time_s": time_s, **summary.as_row(),
+            "episode_length": summary.length, "satisfied": int(satisfied)}
+
+
+# ----- checkpoints -------------------------------------------------------------------------
+def checkpoint_state(config: TrainConfig, learner: Learner, multipliers: dict[str, Multiplier],
+                     episodes: EpisodeAccumulator, env: BatchedLaneKeepingEnv,
+                     generator: torch.Generator, carry: TensorDictBase, *, iteration: int,
+                     frames: int, elapsed: float) -> dict[str, Any]:
+    return {
+        "iteration": iteration, "frames": frames, "elapsed": elapsed,
+        "config": OmegaConf.to_container(OmegaConf.structured(config)),
+        "actor": learner.actor.state_dict(),
+        "critics": {name: critic.state_dict() for name, critic in learner.critics.items()},
+        "optimizer": learner.optimizer.state_dict(),
+        "multipliers": {name: m.state_dict() for name, m in multipliers.items()},
+        "episodes": episodes.state_dict(),
+        "env": env.sim_state(),
+        "carry": carry.clone(),
+        "torch_rng": torch.get_rng_state(),
+        "generator": generator.get_state(),
+        "numpy_rng": np.random.get_state(),
+    }
+
+
+def restore(state: dict[str, Any], learner: Learner, multipliers: dict[str, Multiplier],
+            episodes: EpisodeAccumulator, env: BatchedLaneKeepingEnv,
+            generator: torch.Generator) -> None:
+    learner.actor.load_state_dict(state["actor"])
+    for name, critic in learner.critics.items():
+        critic.load_state_dict(state["critics"][name])
+    learner.optimizer.load_state_dict(state["optimizer"])
+    for name, multiplier in multipliers.items():
+        multiplier.load_state_dict(state["multipliers"][name])
+    learner.loss.set_multipliers([multipliers[c].value for c in COSTS])
+    episodes.load_state_dict(state["episodes"])
+    env.load_sim_state(state["env"])
+    torch.set_rng_state(state["torch_rng"])
+    generator.set_state(state["generator"])
+    np.random.set_state(state["numpy_rng"])
+
+
+# ----- command line ------------------------------------------------------------------------
+def register_tasks(store: ConfigStore, names: Iterable[str] | None = None) -> None:
+    """Makes every ``tasks/<name>.yaml`` a choice of the ``task`` group (``task=<name>``)."""
+    for name in task_names() if names is None else names:
+        data = read_yaml(task_file(name))
+        node = dict(data) if isinstance(data, dict) else {}
+        node.setdefault("name", name)
+        store.store(group="task", name=name, node=node)
+
+
+def resolve_config(cfg: DictConfig) -> TrainConfig:
+    """The validated config; a resumed run keeps its saved settings except
+    :data:`RESUME_KEEPS`."""
+    config = validate(cfg)
+    saved = config.resolved_run_dir() / "config.yaml"
+    if config.resume and saved.exists():
+        stored = OmegaConf.load(saved)
+        for key in RESUME_KEEPS:
+            stored[key] = getattr(config, key)
+        stored["resume"] = True
+        stored["run_dir"] = str(config.resolved_run_dir())
+        config = validate(stored)
+    return config
+
+
+register_tasks(ConfigStore.instance())
+
+
+@hydra.main(version_base="1.3", config_path="conf", config_name="train")
+def main(cfg: DictConfig) -> None:
+    try:
+        train(resolve_config(cfg))
+    except ConfigError as err:
+        print(f"error: {err}", file=sys.stderr)
+        raise SystemExit(2) from None
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,204 @@
+"""The trainer: a tiny run for every algo × action × obs, checkpoints, exact resume, bad input."""
+
+from __future__ import annotations
+
+import crllk  # noqa: F401  (headless GL before torchrl)
+
+import csv
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+import torch
+from hydra import compose, initialize_config_module
+
+from crllk.checkpoint import load_checkpoint
+from crllk.train import resolve_config, train
+from crllk.train_config import validate
+
+REPO = Path(__file__).resolve().parents[1]
+NUM_ENVS, ROLLOUT = 2, 8
+FRAMES_PER_ITERATION = NUM_ENVS * ROLLOUT
+TINY = [f"num_envs={NUM_ENVS}", f"rollout_steps={ROLLOUT}", "ppo.minibatch_size=8",
+        "ppo.epochs=2", "task.horizon=12", "progress=false", "checkpoint_every=1"]
+
+
+def compose_config(overrides: list[str]):
+    with initialize_config_module(config_module="crllk.conf", version_base="1.3"):
+        return compose(config_name="train", overrides=overrides)
+
+
+def run_in_process(run_dir: Path, iterations: int, extra: list[str] = (), *,
+                   frames_per_iteration: int = FRAMES_PER_ITERATION) -> Path:
+    cfg = compose_config([*TINY, f"run_dir={run_dir}",
+                          f"total_frames={iterations * frames_per_iteration}", *extra])
+    return train(resolve_config(cfg))
+
+
+def read_rows(path: Path) -> list[dict[str, str]]:
+    with path.open(newline="") as handle:
+        return list(csv.DictReader(handle))
+
+
+def run_command(*args: str, timeout: float = 120) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "crllk.train", *args], cwd=REPO,
+                          capture_output=True, text=True, timeout=timeout)
+
+
+@pytest.mark.parametrize("obs", ["state", "pixels"])
+@pytest.mark.parametrize("action", ["discrete", "continuous"])
+@pytest.mark.parametrize("algo", ["crllk", "ppo"])
+def test_tiny_run_of_every_variant(tmp_path, algo, action, obs):
+    run = run_in_process(tmp_path / "run", 3, [f"algo={algo}", f"action={action}", f"obs={obs}",
+                                                "eval.every=3", "eval.episodes=2",
+                                                "eval.num_envs=2"])
+    rows = read_rows(run / "metrics.csv")
+    assert [int(r["iteration"]) for r in rows] == [1, 2, 3]
+    assert int(rows[-1]["frames"]) == 3 * FRAMES_PER_ITERATION
+    for row in rows:
+        assert all(math.isfinite(float(row[k])) for k in ("loss_objective", "loss_critic",
+                                                          "loss_cost_critic", "entropy"))
+    # horizon 12 with 8 steps per iteration: episodes finish by iteration 2
+    assert sum(int(r["episodes"]) for r in rows) >= NUM_ENVS
+    if action == "discrete":
+        fractions = [float(rows[0][f"action_{n}"]) for n in ("left", "right", "straight")]
+        assert sum(fractions) == pytest.approx(1.0)
+    lambdas = [float(r["lambda_lane"]) for r in rows]
+    if algo == "ppo":  # frozen fixed weights
+        assert lambdas == [1.0, 1.0, 1.0]
+        expected = 4.0 if action == "discrete" else 40.0
+        assert {float(r["lambda_collision"]) for r in rows} == {expected}
+    else:
+        assert all(v >= 0.0 for v in lambdas)
+    evaluation = read_rows(run / "eval.csv")
+    assert len(evaluation) == 1 and int(evaluation[0]["episodes"]) == 2
+    state = load_checkpoint(run / "checkpoints" / "last.pt")
+    assert state["iteration"] == 3 and state["frames"] == 3 * FRAMES_PER_ITERATION
+    assert set(state["critics"]) == {"reward", "lane", "collision"}
+    assert (run / "config.yaml").exists()
+
+
+def test_multiplier_rises_while_the_constraint_is_violated(tmp_path):
+    """An untrained policy leaves the road: λ_coll must grow from 0 by dual ascent."""
+    run = run_in_process(tmp_path / "run", 3, ["algo.collision.step_size=0.5", "num_envs=4",
+                                               "rollout_steps=96", "task.horizon=512"],
+                         frames_per_iteration=4 * 96)
+    rows = read_rows(run / "metrics.csv")
+    collisions = [float(r["J_coll"]) for r in rows if int(r["episodes"]) > 0]
+    assert collisions and max(collisions) > 0.02
+    assert float(rows[-1]["lambda_collision"]) > 0.0
+
+
+def _assert_same(a, b, path="state"):
+    if isinstance(a, dict):
+        assert set(a) == set(b), path
+        for key in a:
+            _assert_same(a[key], b[key], f"{path}.{key}")
+    elif isinstance(a, (list, tuple)):
+        assert len(a) == len(b), path
+        for i, (x, y) in enumerate(zip(a, b, strict=True)):
+            _assert_same(x, y, f"{path}[{i}]")
+    elif isinstance(a, torch.Tensor):
+        assert torch.equal(a, b), path
+    elif hasattr(a, "shape") and hasattr(a, "dtype"):  # numpy
+        assert (a == b).all(), path
+    elif hasattr(a, "to_dict"):  # TensorDict
+        _assert_same(a.to_dict(), b.to_dict(), path)
+    else:
+        assert a == b or (a != a and b != b), path
+
+
+def _comparable(state: dict) -> dict:
+    state = dict(state)
+    state.pop("elapsed")
+    config = dict(state.pop("config"))
+    config.pop("run_dir")
+    config.pop("resume")
+    return {**state, "config": config}
+
+
+def test_killed_run_resumes_exactly(tmp_path):
+    """SIGKILL a real ``python -m crllk.train`` after a checkpoint, resume it, and compare its
+    final checkpoint with an uninterrupted run of the same length."""
+    killed = tmp_path / "killed"
+    checkpoint = killed / "checkpoints" / "last.pt"
+    args = [*TINY, f"run_dir={killed}", "total_frames=100000000"]
+    process = subprocess.Popen([sys.executable, "-m", "crllk.train", *args], cwd=REPO,
+                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline:
+            if checkpoint.exists() and load_checkpoint(checkpoint)["iteration"] >= 2:
+                break
+            time.sleep(0.2)
+        else:
+            pytest.fail("no checkpoint at iteration 2 within 120 s")
+    finally:
+        process.send_signal(signal.SIGKILL)
+        process.wait()
+    iterations = load_checkpoint(checkpoint)["iteration"] + 2
+    total = f"total_frames={iterations * FRAMES_PER_ITERATION}"
+    resumed = run_command(*TINY, f"run_dir={killed}", total, "resume=true")
+    assert resumed.returncode == 0, resumed.stderr[-2000:]
+    assert "resuming" in resumed.stdout
+
+    straight = run_in_process(tmp_path / "straight", iterations)
+    a = load_checkpoint(straight / "checkpoints" / "last.pt")
+    b = load_checkpoint(checkpoint)
+    assert a["iteration"] == b["iteration"] == iterations
+    _assert_same(_comparable(a), _comparable(b))
+    rows_a, rows_b = read_rows(straight / "metrics.csv"), read_rows(killed / "metrics.csv")
+    assert [r["iteration"] for r in rows_b] == [str(i) for i in range(1, iterations + 1)]
+    for row_a, row_b in zip(rows_a, rows_b, strict=True):
+        for key in ("time_s", "frames_per_s"):
+            row_a.pop(key), row_b.pop(key)
+        assert row_a == row_b
+
+
+def test_command_line_run_prints_its_directory(tmp_path):
+    result = run_command(*TINY, f"run_dir={tmp_path / 'cli'}", "total_frames=16",
+                         "task=obstacle_loop")
+    assert result.returncode == 0, result.stderr[-2000:]
+    assert f"run directory: {tmp_path / 'cli'}" in result.stdout
+    assert (tmp_path / "cli" / "metrics.csv").exists()
+
+
+def test_existing_run_is_not_overwritten(tmp_path):
+    run_in_process(tmp_path / "run", 1)
+    with pytest.raises(ValueError, match="resume=true"):
+        run_in_process(tmp_path / "run", 1)
+
+
+@pytest.mark.parametrize(("override", "expected"), [
+    ("task=no_such_map", "no_such_map"),
+    ("algo.lane.threshold=-1", "algo.lane.threshold: must be >= 0"),
+    ("total_frames=many", "total_frames"),
+    ("obs=camera", "camera"),
+    ("ppo.gamma=1.5", "ppo.gamma: must lie in [0, 1]"),
+])
+def test_bad_override_fails_clearly(tmp_path, override, expected):
+    run_dir = tmp_path / "never"
+    result = run_command(f"run_dir={run_dir}", "total_frames=16", override)
+    assert result.returncode != 0
+    assert expected in result.stderr
+    assert "Traceback" not in result.stderr
+    assert not run_dir.exists()
+
+
+def test_schema_rejects_wrong_types_in_process():
+    cfg = compose_config(["num_envs=two"])
+    with pytest.raises(ValueError, match="num_envs"):
+        validate(cfg)
+
+
+def test_ppo_baseline_weights_follow_the_action_type():
+    discrete = validate(compose_config(["algo=ppo"]))
+    continuous = validate(compose_config(["algo=ppo", "action=continuous"]))
+    assert discrete.algo.frozen and discrete.algo.lane.initial == 1.0
+    assert discrete.algo.collision.initial == 4.0
+    assert continuous.algo.collision.initial == 40.0
