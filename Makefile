@@ -1,5 +1,6 @@
 # Two commands set up everything on a fresh machine:
-#   make demo   install into .venv, drive the scripted lane follower on every map, write pictures
+#   make train  install into .venv and train CRLLK-D on small_loop from state (a few minutes on
+#               2 cores); the run lands in runs/small_loop/crllk-discrete-state-seed0
 #   make test   install into .venv and run the test suite
 PYTHON ?= python3.11
 VENV := .venv
@@ -8,7 +9,9 @@ STAMP := $(VENV)/.installed
 export MUJOCO_GL ?= egl
 export PIP_DISABLE_PIP_VERSION_CHECK := 1
 
-.PHONY: install demo test test-slow lint pictures clean
+TRAIN_ARGS ?=
+
+.PHONY: install train demo test test-slow lint pictures clean
 
 install: $(STAMP)
 
@@ -19,6 +22,9 @@ $(STAMP): pyproject.toml
 	$(PY) -m pip install -q -e ".[dev]" 2>&1 | grep -v -e "is ignored" -e "Warning" -e "!!" -e "\*\*\*" || true
 	$(PY) -c "import crllk, torch, torchrl, dm_control, rerun" 
 	touch $(STAMP)
+
+train: $(STAMP)
+	$(PY) -m crllk.train resume=true $(TRAIN_ARGS)
 
 demo: $(STAMP)
 	$(PY) -m crllk.demo

@@ -1,4 +1,9 @@
-"""Policy actions to wheel duty cycles (left, right) in [-1, 1]."""
+"""Policy actions to wheel duty cycles (left, right) in [-1, 1].
+
+The scalar functions (:func:`discrete_duty`, :func:`velocity_steering_duty`, :func:`clip_duty`)
+return plain ``(left, right)`` tuples for the per-step hot path; the ``*_to_duty`` functions
+wrap them for array callers.
+"""
 
 from __future__ import annotations
 
@@ -6,7 +11,8 @@ import numpy as np
 
 from crllk.sim.constants import WHEEL_DISTANCE, WHEEL_RADIUS
 
-DISCRETE_DUTIES = np.array([[0.04, 0.4], [0.4, 0.04], [0.3, 0.3]])
+_DISCRETE = ((0.04, 0.4), (0.4, 0.04), (0.3, 0.3))
+DISCRETE_DUTIES = np.array(_DISCRETE)
 """Duty cycles (left, right) of the three discrete actions: turn left, turn right, straight."""
 DISCRETE_NAMES = ("left", "right", "straight")
 
@@ -15,23 +21,44 @@ MOTOR_CONSTANT = 27.0
 GAIN, TRIM, LIMIT = 1.0, 0.0, 1.0
 
 
-def discrete_to_duty(action: int) -> np.ndarray:
+def _clip(value: float, limit: float = 1.0) -> float:
+    """``value`` clipped to [-limit, limit] (NaN stays NaN, as with ``np.clip``)."""
+    return min(max(value, -limit), limit)
+
+
+def discrete_duty(action: int) -> tuple[float, float]:
     """Duty cycles (left, right) of discrete action 0 (left), 1 (right) or 2 (straight)."""
     index = int(action)
-    if not 0 <= index < len(DISCRETE_DUTIES):
+    if not 0 <= index < len(_DISCRETE):
         raise ValueError(f"discrete action must be 0, 1 or 2, got {action!r}")
-    return DISCRETE_DUTIES[index].copy()
+    return _DISCRETE[index]
 
 
-def velocity_steering_to_duty(action: np.ndarray) -> np.ndarray:
+def discrete_to_duty(action: int) -> np.ndarray:
+    """:func:`discrete_duty` as a new array."""
+    return np.array(discrete_duty(action))
+
+
+def velocity_steering_duty(velocity: float, steering: float) -> tuple[float, float]:
     """Duckietown inverse kinematics: (velocity, steering) in [-1, 1]^2 to duty (left, right).
 
     Wheel rates w_{r,l} = (v +- steering * b / 2) / R; duty u = w * (gain +- trim) / k, clipped
     to +-limit. So u ~= 1.165 v and the duty saturates for v >= 0.86.
     """
-    velocity, steering = np.clip(np.asarray(action, dtype=np.float64), -1.0, 1.0)
+    velocity, steering = _clip(float(velocity)), _clip(float(steering))
     rate_right = (velocity + 0.5 * steering * WHEEL_DISTANCE) / WHEEL_RADIUS
     rate_left = (velocity - 0.5 * steering * WHEEL_DISTANCE) / WHEEL_RADIUS
     duty_right = rate_right * (GAIN + TRIM) / MOTOR_CONSTANT
     duty_left = rate_left * (GAIN - TRIM) / MOTOR_CONSTANT
-    return np.clip(np.array([duty_left, duty_right]), -LIMIT, LIMIT)
+    return _clip(duty_left, LIMIT), _clip(duty_right, LIMIT)
+
+
+def velocity_steering_to_duty(action: np.ndarray) -> np.ndarray:
+    """:func:`velocity_steering_duty` of a (velocity, steering) pair, as an array."""
+    velocity, steering = np.asarray(action, dtype=np.float64).tolist()
+    return np.array(velocity_steering_duty(velocity, steering))
+
+
+def clip_duty(left: float, right: float) -> tuple[float, float]:
+    """Raw duty cycles (left, right) clipped to [-1, 1]."""
+    return _clip(float(left)), _clip(float(right))

@@ -22,6 +22,10 @@ Per-sub-environment details for evaluation and visualisation stay on the simulat
 ``env.tasks[i].outcome`` (lane pose, costs, termination reason ``'off_road'``, ``'collision'``
 or ``'unstable'``), ``env.physics[i]`` (pose, speeds) and ``env.step_counts[i]``.
 
+Snapshots: ``env.sim_state()`` returns every simulation's full state (MuJoCo, task, spawn
+generator, step counts, last observations) as plain values; ``env.load_sim_state(state)`` on an
+env built with the same arguments continues exactly as the original would (training resume).
+
 Seeding: sub-environment ``i`` draws its spawns from ``np.random.RandomState(s_i)`` where
 ``s_i = sub_env_seeds(seed, N)[i]`` (children of ``np.random.SeedSequence(seed)``), so
 ``crllk.load(task, seed=s_i, ...)`` reproduces sub-environment ``i`` step for step.
@@ -40,7 +44,13 @@ from tensordict import TensorDict, TensorDictBase
 from torchrl.data import Bounded, Categorical, Composite, TensorSpec, Unbounded
 from torchrl.envs import EnvBase
 
-from crllk.lane_keeping import ACTIONS, OBSERVATIONS, LaneKeeping, state_feature_names
+from crllk.lane_keeping import (
+    ACTIONS,
+    OBSERVATIONS,
+    LaneKeeping,
+    StepOutcome,
+    state_feature_names,
+)
 from crllk.sim.physics import Physics
 from crllk.task_config import TaskConfig, load_task_config
 
@@ -143,41 +153,82 @@ class BatchedLaneKeepingEnv(EnvBase):
         physics, task = self.physics[i], self.tasks[i]
         with physics.reset_context():
             task.initialize_episode(physics)
-        self._observations[i] = task.get_observation(physics)[self.observation_type]
+        self._observations[i] = task.main_observation(physics)
         self.step_counts[i] = 0
 
     def _step(self, tensordict: TensorDictBase) -> TensorDictBase:
-        """One control step of every sub-environment."""
-        actions = tensordict.get("action").detach().cpu().numpy()
-        rewards = np.zeros((3, self.num_envs, 1), dtype=np.float32)
-        terminated = np.zeros((self.num_envs, 1), dtype=bool)
-        for i in range(self.num_envs):
-            rewards[:, i, 0], terminated[i, 0] = self._step_one(i, actions[i])
-        self.step_counts += 1
-        truncated = (self.step_counts >= self.config.horizon)[:, None] & ~terminated
-        reward, cost_lane, cost_collision = torch.from_numpy(rewards)  # contiguous [N, 1] each
-        out = {self.observation_type: torch.from_numpy(self._observations.copy()),
-               "reward": reward, "cost_lane": cost_lane, "cost_collision": cost_collision,
-               "terminated": torch.from_numpy(terminated),
-               "truncated": torch.from_numpy(truncated),
-               "done": torch.from_numpy(terminated | truncated)}
-        return self._tensordict(out)
+        """One control step of every sub-environment.
 
-    def _step_one(self, i: int, action: np.ndarray) -> tuple[tuple[float, float, float], bool]:
-        """Step sub-environment ``i``: (reward, cost_lane, cost_collision) and termination."""
-        physics, task = self.physics[i], self.tasks[i]
-        task.before_step(action, physics)
-        physics.step(self.n_sub_steps)
-        task.after_step(physics)
-        reward = task.get_reward(physics)
-        observation = task.get_observation(physics)
-        self._observations[i] = observation[self.observation_type]
-        costs = (observation["cost_lane"], observation["cost_collision"])
-        return (reward, *costs), task.get_termination(physics) is not None
+        Each phase runs over all sub-environments before the next (commands, physics, task
+        bookkeeping and observations): the interpreter and MuJoCo each stay warm in the CPU
+        caches, which is markedly faster than interleaving them per sub-environment."""
+        actions = tensordict.get("action").detach().cpu().tolist()
+        for physics, task, action in zip(self.physics, self.tasks, actions, strict=True):
+            task.before_step(action, physics)
+        for physics in self.physics:
+            physics.step(self.n_sub_steps)
+        for i, (physics, task) in enumerate(zip(self.physics, self.tasks, strict=True)):
+            task.after_step(physics)
+            self._observations[i] = task.main_observation(physics)
+        self.step_counts += 1
+        return self._tensordict(self._step_outputs([task.outcome for task in self.tasks]))
+
+    def _step_outputs(self, outcomes: list[StepOutcome]) -> dict[str, torch.Tensor]:
+        """The step's observation, reward-like and done entries, each ``[N, ...]``."""
+        rewards = np.array([[o.progress for o in outcomes], [o.cost_lane for o in outcomes],
+                            [o.cost_collision for o in outcomes]], dtype=np.float32)
+        reward, cost_lane, cost_collision = torch.from_numpy(rewards[:, :, None])
+        terminated = np.array([[o.termination is not None] for o in outcomes])
+        truncated = (self.step_counts >= self.config.horizon)[:, None] & ~terminated
+        return {self.observation_type: torch.from_numpy(self._observations.copy()),
+                "reward": reward, "cost_lane": cost_lane, "cost_collision": cost_collision,
+                "terminated": torch.from_numpy(terminated),
+                "truncated": torch.from_numpy(truncated),
+                "done": torch.from_numpy(terminated | truncated)}
 
     def _tensordict(self, entries: dict[str, torch.Tensor]) -> TensorDict:
-        out = TensorDict(entries, batch_size=self.batch_size)
-        return out if self.device == torch.device("cpu") else out.to(self.device)
+        """``entries`` on the env's device (set, so TorchRL need not move them again)."""
+        return TensorDict(entries, batch_size=self.batch_size, device=self.device)
+
+    # ----- snapshots --------------------------------------------------------------------
+    def sim_state(self) -> dict[str, Any]:
+        """A snapshot of everything that determines the env's future: each sub-environment's
+        full MuJoCo state (delay history included), task hook state and spawn generator, the
+        step counts, seeds and last observations. Plain Python values and tensors only, so
+        ``torch.save`` / ``torch.load`` (``weights_only``) round-trip it."""
+        return {**self._identity(),
+                "seeds": list(self.seeds),
+                "step_counts": self.step_counts.tolist(),
+                "observations": torch.from_numpy(self._observations.copy()),
+                "sub_envs": [{"physics": physics.full_state(),
+                              "instabilities": physics.instabilities,
+                              "task": task.episode_state()}
+                             for physics, task in zip(self.physics, self.tasks, strict=True)]}
+
+    def load_sim_state(self, state: dict[str, Any]) -> None:
+        """Restore a :meth:`sim_state` taken from an env built with the same arguments; the
+        env then steps exactly as the original did from the snapshot on.
+
+        Raises:
+            ValueError: if the snapshot's task, num_envs, observation or action differ.
+        """
+        for key, expected in self._identity().items():
+            if state.get(key) != expected:
+                raise ValueError(f"snapshot {key} is {state.get(key)!r}, this env has "
+                                 f"{expected!r}: restore into an env built with the same "
+                                 "arguments")
+        for physics, task, sub in zip(self.physics, self.tasks, state["sub_envs"], strict=True):
+            physics.set_full_state(sub["physics"])
+            physics.instabilities = sub["instabilities"]
+            task.load_episode_state(sub["task"])
+        self.seeds = list(state["seeds"])
+        self.step_counts[:] = state["step_counts"]
+        self._observations[:] = state["observations"].numpy()
+
+    def _identity(self) -> dict[str, Any]:
+        """The constructor arguments a snapshot must agree on."""
+        return {"task": self.config.name, "num_envs": self.num_envs,
+                "observation": self.observation_type, "action": self.action_type}
 
     # ----- teardown ---------------------------------------------------------------------
     def close(self, *, raise_if_closed: bool = True) -> None:

@@ -19,7 +19,7 @@ from dm_control.rl import control
 from dm_control.suite import base
 from dm_env import specs
 
-from crllk.actions import discrete_to_duty, velocity_steering_to_duty
+from crllk.actions import clip_duty, discrete_duty, velocity_steering_duty
 from crllk.maps import DuckietownMap, LanePose, MapObject
 from crllk.sim.physics import Physics, check_points
 from crllk.task_config import TaskConfig, load_task_config
@@ -81,7 +81,8 @@ class LaneKeeping(base.Task):
         self.map: DuckietownMap = config.map
         self.observation_type = observation
         self.action_type = action
-        self._history = np.zeros((_command_history_length(config), 2))
+        self._history: list[tuple[float, float]] = []
+        """Duty cycles (left, right) commanded, newest first."""
         self._outcome: StepOutcome | None = None
         self._previous_pose: tuple[float, float, float] | None = None
 
@@ -107,7 +108,7 @@ class LaneKeeping(base.Task):
         x, y, yaw = self._spawn_pose()
         physics.set_pose(x, y, yaw)
         physics.forward()
-        self._history[:] = 0.0
+        self._history = [(0.0, 0.0)] * _command_history_length(self.config)
         self._previous_pose = (x, y, yaw)
         pose = self.map.lane_pose(x, y, yaw)
         self._outcome = StepOutcome(0.0, pose, self._lane_cost(pose), 0.0, None)
@@ -133,33 +134,36 @@ class LaneKeeping(base.Task):
         clearance = self.config.spawn.obstacle_clearance
         if any(_distance_to_footprint(obj, x, y) < clearance for obj in self.map.objects):
             return False
-        return all(self.map.is_road(px, py) for px, py in check_points(x, y, yaw))
+        return self.map.all_road(check_points(x, y, yaw))
 
     # ----- stepping ---------------------------------------------------------------------
     def before_step(self, action, physics: Physics) -> None:
-        if self.action_type == "discrete":
-            duty = discrete_to_duty(np.asarray(action).item())
-        elif self.action_type == "continuous":
-            duty = velocity_steering_to_duty(np.asarray(action, dtype=np.float64).reshape(2))
-        else:
-            duty = np.clip(np.asarray(action, dtype=np.float64).reshape(2), -1.0, 1.0)
-        if not np.all(np.isfinite(duty)):
+        duty = self._duty(action)
+        if not (math.isfinite(duty[0]) and math.isfinite(duty[1])):
             raise ValueError(f"action {action!r} is not finite")
-        self._history[1:] = self._history[:-1]
-        self._history[0] = duty
+        self._history = [duty, *self._history[:-1]]
         self._previous_pose = physics.pose()
         physics.set_wheel_duty(duty)
+
+    def _duty(self, action) -> tuple[float, float]:
+        """Wheel duty cycles (left, right) of a policy action."""
+        if self.action_type == "discrete":
+            return discrete_duty(action if type(action) is int else np.asarray(action).item())
+        pair = np.asarray(action, dtype=np.float64).reshape(2).tolist()
+        if self.action_type == "continuous":
+            return velocity_steering_duty(*pair)
+        return clip_duty(*pair)
 
     def after_step(self, physics: Physics) -> None:
         x, y, yaw = physics.pose()
         pose = self.map.lane_pose(x, y, yaw)
         px, py, _ = self._previous_pose
-        heading = self._outcome.lane_pose.lane.project(px, py).heading
+        heading = self._outcome.lane_pose.lane.heading_at(px, py)
         progress = (x - px) * math.cos(heading) + (y - py) * math.sin(heading)
         termination = None
         if physics.diverged:
             termination, progress = "unstable", 0.0
-        elif not all(self.map.is_road(cx, cy) for cx, cy in check_points(x, y, yaw)):
+        elif not self.map.all_road(check_points(x, y, yaw)):
             termination = "off_road"
         elif physics.touches_obstacle():
             termination = "collision"
@@ -178,6 +182,41 @@ class LaneKeeping(base.Task):
         """The last step's progress, lane pose, costs and termination reason."""
         return self._outcome
 
+    # ----- snapshots --------------------------------------------------------------------
+    def episode_state(self) -> dict[str, Any]:
+        """Everything the hooks carry between steps, and the spawn generator's state, as
+        plain Python values (see :meth:`load_episode_state`)."""
+        name, keys, position, has_gauss, cached_gaussian = self.random.get_state(legacy=True)
+        return {"history": [list(duty) for duty in self._history],
+                "previous_pose": self._previous_pose,
+                "outcome": None if self._outcome is None else self._outcome_state(),
+                "random": (name, keys.tolist(), position, has_gauss, cached_gaussian)}
+
+    def load_episode_state(self, state: dict[str, Any]) -> None:
+        """Restore an :meth:`episode_state`."""
+        self._history = [(left, right) for left, right in state["history"]]
+        previous = state["previous_pose"]
+        self._previous_pose = None if previous is None else tuple(previous)
+        outcome = state["outcome"]
+        self._outcome = None if outcome is None else self._outcome_from_state(outcome)
+        name, keys, position, has_gauss, cached_gaussian = state["random"]
+        self.random.set_state((name, np.asarray(keys, np.uint32), position, has_gauss,
+                               cached_gaussian))
+
+    def _outcome_state(self) -> dict[str, Any]:
+        outcome, pose = self._outcome, self._outcome.lane_pose
+        return {"progress": outcome.progress, "cost_lane": outcome.cost_lane,
+                "cost_collision": outcome.cost_collision, "termination": outcome.termination,
+                "lateral": pose.lateral, "heading_error": pose.heading_error,
+                "on_road": pose.on_road, "along": pose.along,
+                "lane": self.map.lanes.index(pose.lane)}
+
+    def _outcome_from_state(self, state: dict[str, Any]) -> StepOutcome:
+        pose = LanePose(state["lateral"], state["heading_error"], state["on_road"],
+                        state["along"], self.map.lanes[state["lane"]])
+        return StepOutcome(state["progress"], pose, state["cost_lane"], state["cost_collision"],
+                           state["termination"])
+
     def get_reward(self, physics: Physics) -> float:
         return self._outcome.progress
 
@@ -185,26 +224,33 @@ class LaneKeeping(base.Task):
         return 0.0 if self._outcome.termination else None
 
     def get_observation(self, physics: Physics) -> dict[str, Any]:
-        obs: dict[str, Any] = {}
+        main = self.main_observation(physics)
+        if self.observation_type == "state":
+            main = np.array(main)
+        return {self.observation_type: main,
+                "cost_lane": np.float64(self._outcome.cost_lane),
+                "cost_collision": np.float64(self._outcome.cost_collision)}
+
+    def main_observation(self, physics: Physics) -> np.ndarray | list[float]:
+        """The camera image (uint8 HxWx3) or the state features (a list of floats)."""
         if self.observation_type == "pixels":
             cam = self.config.camera
-            obs["pixels"] = physics.render_camera(cam.height, cam.width, cam.supersample)
-        else:
-            obs["state"] = self.state_features(physics)
-        obs["cost_lane"] = np.float64(self._outcome.cost_lane)
-        obs["cost_collision"] = np.float64(self._outcome.cost_collision)
-        return obs
+            return physics.render_camera(cam.height, cam.width, cam.supersample)
+        return self.state_feature_list(physics)
 
     def state_features(self, physics: Physics) -> np.ndarray:
         """The ``state`` observation; see :func:`state_feature_names`."""
+        return np.array(self.state_feature_list(physics))
+
+    def state_feature_list(self, physics: Physics) -> list[float]:
+        """:meth:`state_features` as a list of floats."""
         pose = self._outcome.lane_pose
         x, y, yaw = physics.pose()
-        curvature = self.map.curvature_ahead(pose, _CURVATURE_LOOKAHEAD)
-        obstacle = _nearest_obstacle_ahead(self.map.objects, x, y, yaw)
-        return np.concatenate([
-            [pose.lateral, math.sin(pose.heading_error), math.cos(pose.heading_error),
-             physics.forward_speed(), physics.yaw_rate()],
-            curvature, obstacle, self._history.reshape(-1)]).astype(np.float64)
+        return [pose.lateral, math.sin(pose.heading_error), math.cos(pose.heading_error),
+                physics.forward_speed(yaw), physics.yaw_rate(),
+                *self.map.curvature_ahead(pose, _CURVATURE_LOOKAHEAD),
+                *_nearest_obstacle_ahead(self.map.objects, x, y, yaw),
+                *(value for duty in self._history for value in duty)]
 
 
 def _distance_to_footprint(obj: MapObject, x: float, y: float) -> float:

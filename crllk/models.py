@@ -106,17 +106,55 @@ def original_pixel_trunk(image_shape: Sequence[int], feature_dim: int) -> nn.Mod
     return nn.Sequential(convs, nn.Linear(flat, feature_dim), nn.Sigmoid())
 
 
-def state_encoder(num_features: int, hidden: int) -> nn.Module:
-    """Two tanh layers on the lane-relative state features."""
-    return nn.Sequential(nn.Linear(num_features, hidden), nn.Tanh(),
+STATE_FEATURE_SCALES = {  # typical magnitude of each state feature, by name prefix (its units)
+    "lateral_offset": 0.1,  # m
+    "heading_error": 1.0,  # sin/cos
+    "forward_speed": 0.2,  # m/s
+    "yaw_rate": 1.5,  # rad/s
+    "curvature": 2.5,  # 1/m
+    "obstacle_distance": 1.5,  # m
+    "obstacle_lateral": 0.1,  # m
+    "duty": 0.5,  # duty cycle
+}
+
+
+def state_feature_scales(names: Sequence[str]) -> torch.Tensor:
+    """The divisor of each named state feature that brings it to order one."""
+    scales = []
+    for name in names:
+        matches = [v for prefix, v in STATE_FEATURE_SCALES.items() if name.startswith(prefix)]
+        scales.append(matches[0] if matches else 1.0)
+    return torch.tensor(scales, dtype=torch.float32)
+
+
+class FeatureScale(nn.Module):
+    """Divides each feature by a fixed scale (a buffer, saved with the network)."""
+
+    def __init__(self, scales: torch.Tensor):
+        super().__init__()
+        self.register_buffer("scales", scales.clone())
+
+    def forward(self, features: torch.Tensor) -> torch.Tensor:
+        return features / self.scales
+
+
+def state_encoder(num_features: int, hidden: int,
+                  feature_names: Sequence[str] | None = None) -> nn.Module:
+    """Two tanh layers on the lane-relative state features, scaled to order one by name."""
+    scales = (state_feature_scales(feature_names) if feature_names is not None
+              else torch.ones(num_features))
+    if scales.numel() != num_features:
+        raise ValueError(f"{scales.numel()} feature names for {num_features} features")
+    return nn.Sequential(FeatureScale(scales), nn.Linear(num_features, hidden), nn.Tanh(),
                          nn.Linear(hidden, hidden), nn.Tanh())
 
 
-def make_encoder(observation: str, observation_shape: Sequence[int],
-                 config: ModelConfig) -> tuple[nn.Module, int]:
+def make_encoder(observation: str, observation_shape: Sequence[int], config: ModelConfig,
+                 feature_names: Sequence[str] | None = None) -> tuple[nn.Module, int]:
     """The encoder for one network and the width of its output."""
     if observation == "state":
-        return state_encoder(observation_shape[-1], config.hidden), config.hidden
+        encoder = state_encoder(observation_shape[-1], config.hidden, feature_names)
+        return encoder, config.hidden
     if observation != "pixels":
         raise ValueError(f"observation must be 'pixels' or 'state', got {observation!r}")
     image_shape = tuple(observation_shape[-3:])
@@ -152,10 +190,12 @@ class GaussianParams(nn.Module):
 
 
 def make_actor(observation: str, observation_shape: Sequence[int], action: str,
-               action_spec: TensorSpec, config: ModelConfig) -> ProbabilisticActor:
+               action_spec: TensorSpec, config: ModelConfig,
+               feature_names: Sequence[str] | None = None) -> ProbabilisticActor:
     """The policy: categorical over the three discrete actions, or a tanh-squashed Gaussian
-    over (velocity, steering) in [-1, 1]². Writes ``action`` and ``action_log_prob``."""
-    encoder, width = make_encoder(observation, observation_shape, config)
+    over (velocity, steering) in [-1, 1]². Writes ``action`` and ``action_log_prob``.
+    ``feature_names`` (state observations) choose the fixed input scales."""
+    encoder, width = make_encoder(observation, observation_shape, config, feature_names)
     if action == "discrete":
         num_actions = int(action_spec.space.n)
         net = nn.Sequential(encoder, _head(width, num_actions, gain=0.01))
@@ -176,9 +216,10 @@ def make_actor(observation: str, observation_shape: Sequence[int], action: str,
 
 
 def make_critic(observation: str, observation_shape: Sequence[int], config: ModelConfig,
-                out_key: str = "state_value") -> ValueOperator:
+                out_key: str = "state_value",
+                feature_names: Sequence[str] | None = None) -> ValueOperator:
     """A value network reading the observation and writing ``out_key`` (shape [*B, 1])."""
-    encoder, width = make_encoder(observation, observation_shape, config)
+    encoder, width = make_encoder(observation, observation_shape, config, feature_names)
     net = nn.Sequential(encoder, _head(width, 1, gain=1.0))
     return ValueOperator(net, in_keys=[observation], out_keys=[out_key])
 

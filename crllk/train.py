@@ -17,8 +17,6 @@ continues exactly where the uninterrupted run would have been.
 
 from __future__ import annotations
 
-import crllk  # noqa: F401  (chooses the headless GL backend before torchrl imports mujoco)
-
 import csv
 import io
 import math
@@ -30,7 +28,6 @@ from pathlib import Path
 from typing import Any
 
 import hydra
-import numpy as np
 import torch
 from hydra.core.config_store import ConfigStore
 from omegaconf import DictConfig, OmegaConf
@@ -38,12 +35,14 @@ from tensordict import TensorDictBase
 from torchrl.envs.utils import ExplorationType, set_exploration_type
 from tqdm import tqdm
 
+import crllk  # noqa: F401  (chooses the headless GL backend before torchrl imports mujoco)
 from crllk.checkpoint import atomic_write_text, load_checkpoint, save_checkpoint
 from crllk.envs import BatchedLaneKeepingEnv, make_env
 from crllk.episodes import EpisodeAccumulator, EpisodeStats, summarise
 from crllk.errors import ConfigError
 from crllk.evaluation import run_episodes
 from crllk.lagrange import Multiplier, make_multiplier
+from crllk.lane_keeping import state_feature_names
 from crllk.loss import AdvantageModules, LagrangianPPOLoss, make_advantage_modules
 from crllk.maps import read_yaml
 from crllk.models import ModelConfig, make_actor, make_critic
@@ -81,9 +80,11 @@ def build_learner(config: TrainConfig, env: BatchedLaneKeepingEnv) -> Learner:
     obs = config.obs.name
     shape = env.observation_spec[obs].shape[1:]
     model = ModelConfig(**vars(config.model))
-    actor = make_actor(obs, shape, config.action.name, env.action_spec, model)
-    critics = {"reward": make_critic(obs, shape, model)}
-    critics |= {c: make_critic(obs, shape, model, out_key=f"state_value_{c}") for c in COSTS}
+    names = state_feature_names(env.config) if obs == "state" else None
+    actor = make_actor(obs, shape, config.action.name, env.action_spec, model, names)
+    critics = {"reward": make_critic(obs, shape, model, feature_names=names)}
+    critics |= {c: make_critic(obs, shape, model, out_key=f"state_value_{c}", feature_names=names)
+                for c in COSTS}
     ppo = config.ppo
     loss = LagrangianPPOLoss(actor, critics["reward"], {c: critics[c] for c in COSTS},
                              clip_epsilon=ppo.clip_epsilon, entropy_coeff=ppo.entropy_coeff,
@@ -124,10 +125,23 @@ def collect(env: BatchedLaneKeepingEnv, actor: torch.nn.Module, carry: TensorDic
     return torch.stack(transitions, dim=1), carry
 
 
+def shape_signals(batch: TensorDictBase, config: TrainConfig, off_road_lane_cost: float) -> None:
+    """The signals the learner sees, in place: the reward scaled by ``reward_scale``, and, with
+    ``absorbing_off_road``, the lane cost of every later step of a terminated episode folded
+    into its last step: the robot stays off the road at ``off_road_lane_cost`` (dm) per step
+    for ever, γ·c_off / (1 − γ) in discounted sum. Otherwise ending an episode early would cut
+    its lane cost short and a large λ_lane would make leaving the road look cheap."""
+    nxt = batch["next"]
+    nxt["reward"] = nxt["reward"] * config.reward_scale
+    if config.absorbing_off_road:
+        gamma = config.ppo.gamma
+        tail = off_road_lane_cost * gamma / (1.0 - gamma) if gamma < 1.0 else 0.0
+        nxt["cost_lane"] = nxt["cost_lane"] + tail * nxt["terminated"].to(torch.float32)
+
+
 def ppo_update(learner: Learner, batch: TensorDictBase, config: TrainConfig,
                generator: torch.Generator) -> dict[str, float]:
     """GAE for every signal, then ``epochs`` passes of minibatch PPO; mean diagnostics."""
-    batch["next", "reward"] = batch["next", "reward"] * config.reward_scale
     learner.advantages(batch)
     flat = batch.reshape(-1)
     size, sums, count = flat.shape[0], dict.fromkeys(LOSS_KEYS, 0.0), 0
@@ -211,7 +225,7 @@ def metric_columns(action: str) -> list[str]:
                "J_coll", "episode_length", "lambda_lane", "lambda_collision", *LOSS_KEYS]
     if action == "discrete":
         return columns + [f"action_{n}" for n in DISCRETE_ACTION_NAMES]
-    return columns + ["action_velocity_mean", "action_steering_mean", "action_steering_std"]
+    return [*columns, "action_velocity_mean", "action_steering_mean", "action_steering_std"]
 
 
 EVAL_COLUMNS = ["iteration", "frames", "time_s", "episodes", "J_R", "J_clane", "J_coll",
@@ -266,6 +280,7 @@ def train(config: TrainConfig) -> Path:
         finished = episodes.add_batch(batch)
         update_multipliers(multipliers, finished)
         learner.loss.set_multipliers([multipliers[c].value for c in COSTS])
+        shape_signals(batch, config, env.config.off_road_lane_cost)
         losses = ppo_update(learner, batch, config, generator)
         iteration += 1
         frames += batch.numel()
@@ -298,7 +313,24 @@ def train(config: TrainConfig) -> Path:
         eval_env.close()
     print(f"done: {frames} frames in {iteration} iterations; run directory: {run_dir}",
           flush=True)
+    print_last_evaluation(evaluations.path, config)
     return run_dir
+
+
+def print_last_evaluation(path: Path, config: TrainConfig) -> None:
+    """One line on the latest evaluation in ``eval.csv``, if there is one."""
+    if not path.exists():
+        return
+    with path.open(newline="") as handle:
+        rows = list(csv.DictReader(handle))
+    if not rows:
+        return
+    last = rows[-1]
+    verdict = "both constraints hold" if last["satisfied"] == "1" else "constraints violated"
+    print(f"evaluation at {last['frames']} frames ({last['episodes']} deterministic episodes): "
+          f"J_R {float(last['J_R']):.2f} m, J_clane {float(last['J_clane']):.3f} dm "
+          f"(≤ {config.algo.lane.threshold}), J_coll {float(last['J_coll']):.3f} "
+          f"(≤ {config.algo.collision.threshold}): {verdict}", flush=True)
 
 
 SOURCE_RUN = "run"
@@ -341,7 +373,6 @@ def checkpoint_state(config: TrainConfig, learner: Learner, multipliers: dict[st
         "carry": carry.clone(),
         "torch_rng": torch.get_rng_state(),
         "generator": generator.get_state(),
-        "numpy_rng": np.random.get_state(),
     }
 
 
@@ -359,7 +390,6 @@ def restore(state: dict[str, Any], learner: Learner, multipliers: dict[str, Mult
     env.load_sim_state(state["env"])
     torch.set_rng_state(state["torch_rng"])
     generator.set_state(state["generator"])
-    np.random.set_state(state["numpy_rng"])
 
 
 # ----- command line ------------------------------------------------------------------------

@@ -79,9 +79,9 @@ class ModelSchema:
 
 @dataclass
 class EvalConfig:
-    every: int = 0
-    episodes: int = 16
-    num_envs: int = 16
+    every: int = 20
+    episodes: int = 8
+    num_envs: int = 8
     seed: int = 1_000_000
 
 
@@ -99,6 +99,7 @@ class TrainConfig:
     num_envs: int = 16
     rollout_steps: int = 64
     reward_scale: float = 30.0
+    absorbing_off_road: bool = False
     threads: int = 1
     checkpoint_every: int = 10
     progress: bool = True

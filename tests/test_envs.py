@@ -14,6 +14,7 @@ from torchrl.envs.utils import check_env_specs
 
 import crllk
 from crllk.envs import COST_KEYS, BatchedLaneKeepingEnv, make_env, sub_env_seeds
+from crllk.sim.physics import box_average
 
 TASK = "small_loop"
 NUM_ENVS = 2
@@ -219,3 +220,15 @@ def test_make_env_is_exported_lazily():
     from crllk.envs import make_env
 
     assert crllk.make_env is make_env
+
+
+@pytest.mark.parametrize("factor", [2, 3, 4])
+def test_box_average_is_the_rounded_float_mean(factor):
+    """The integer downsampling of camera images gives exactly the rounded float32 block mean,
+    including every 2x2 block sum that rounds half up."""
+    rng = np.random.default_rng(factor)
+    image = rng.integers(0, 256, (6 * factor, 8 * factor, 3), dtype=np.uint8)
+    image[:factor, :, :] = rng.choice([0, 1, 2, 254, 255], (factor, 8 * factor, 3))
+    blocks = image.reshape(6, factor, 8, factor, 3)
+    expected = (blocks.mean(axis=(1, 3), dtype=np.float32) + 0.5).astype(np.uint8)
+    np.testing.assert_array_equal(box_average(image, factor), expected)

@@ -2,11 +2,8 @@
 
 from __future__ import annotations
 
-import crllk  # noqa: F401  (headless GL before torchrl)
-
 import csv
 import math
-import os
 import signal
 import subprocess
 import sys
@@ -17,6 +14,7 @@ import pytest
 import torch
 from hydra import compose, initialize_config_module
 
+import crllk  # noqa: F401  (headless GL before torchrl)
 from crllk.checkpoint import load_checkpoint
 from crllk.train import resolve_config, train
 from crllk.train_config import validate

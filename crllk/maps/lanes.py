@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 LANE_OFFSET = 0.117
 """Distance of a lane centre from the road centre line (m)."""
@@ -27,8 +28,7 @@ def wrap_angle(angle: float) -> float:
     return (angle + math.pi) % (2.0 * math.pi) - math.pi
 
 
-@dataclass(frozen=True)
-class Projection:
+class Projection(NamedTuple):
     """A point relative to one lane: offsets in m, ``heading`` of the lane there in rad."""
 
     lateral: float
@@ -77,6 +77,13 @@ class Lane:
             along=swept * self.radius,
             heading=wrap_angle(angle + self.turn * math.pi / 2.0),
         )
+
+    def heading_at(self, x: float, y: float) -> float:
+        """The lane's heading (rad) at the projection of (x, y): ``project(x, y).heading``."""
+        if self.turn == 0:
+            return self.start_heading
+        cx, cy = self.centre
+        return wrap_angle(math.atan2(y - cy, x - cx) + self.turn * math.pi / 2.0)
 
     def point_at(self, along: float, lateral: float = 0.0) -> tuple[float, float, float]:
         """World pose (x, y, heading) at ``along`` metres from the entry, ``lateral`` right."""

@@ -45,6 +45,11 @@ def named_lane(tile: Tile) -> tuple[str, str] | None:
     return None
 
 
+def _lane_key(lane: Lane) -> tuple[int, int, str, str]:
+    """(column, row, entry, exit): identifies a lane of a map."""
+    return lane.column, lane.row, lane.entry, lane.exit
+
+
 @dataclass(frozen=True)
 class LanePose:
     """A world pose relative to the lane of the travel direction best aligned with its yaw.
@@ -96,6 +101,12 @@ class DuckietownMap:
                     build_lane(t.column, t.row, self.rows, self.tile_size, entry, exit_)
                     for exit_ in edges if exit_ != entry]
         self.lanes: tuple[Lane, ...] = tuple(ln for v in self._lanes.values() for ln in v)
+        # Lookup tables for the per-step queries.
+        self._drivable = [[t.drivable for t in row] for row in spec.tiles]
+        self._tile_lanes = {(t.column, t.row): tuple(ln for e in openings(t)
+                                                     for ln in self._lanes[(t.column, t.row, e)])
+                            for t in self.road_tiles}
+        self._next_lanes = {_lane_key(ln): self._find_next_lane(ln) for ln in self.lanes}
 
     # ----- grid -------------------------------------------------------------------------
     @property
@@ -121,26 +132,30 @@ class DuckietownMap:
 
     def is_road(self, x: float, y: float) -> bool:
         """Whether a world point lies on a drivable tile."""
-        index = self.tile_index(x, y)
-        return index is not None and self.tile(*index).drivable
+        column = math.floor(x / self.tile_size)
+        row = self.rows - 1 - math.floor(y / self.tile_size)
+        return 0 <= column < self.columns and 0 <= row < self.rows and self._drivable[row][column]
+
+    def all_road(self, points: list[tuple[float, float]]) -> bool:
+        """Whether every world point (x, y) lies on a drivable tile."""
+        return all(self.is_road(x, y) for x, y in points)
 
     def tile_lanes(self, column: int, row: int) -> list[Lane]:
         """All lanes of a road tile."""
-        t = self.tile(column, row)
-        return [ln for e in openings(t) for ln in self._lanes[(column, row, e)]]
+        return list(self._tile_lanes.get((column, row), ()))
 
     # ----- lane pose --------------------------------------------------------------------
     def lane_pose(self, x: float, y: float, yaw: float) -> LanePose:
         """Lane-relative pose of (x, y, yaw) on the tile under it (the nearest road tile off
         the road), against the lane best aligned with ``yaw``."""
         index = self.tile_index(x, y)
-        on_road = index is not None and self.tile(*index).drivable
+        on_road = index is not None and self._drivable[index[1]][index[0]]
         if not on_road:
             index = self._nearest_road_tile(x, y)
-        lane, proj = self._best_lane(self.tile_lanes(*index), x, y, yaw)
+        lane, proj = self._best_lane(self._tile_lanes[index], x, y, yaw)
         return LanePose(proj.lateral, wrap_angle(yaw - proj.heading), on_road, proj.along, lane)
 
-    def _best_lane(self, lanes: list[Lane], x: float, y: float, yaw: float):
+    def _best_lane(self, lanes: tuple[Lane, ...], x: float, y: float, yaw: float):
         best = None
         for lane in lanes:
             proj = lane.project(x, y)
@@ -166,6 +181,12 @@ class DuckietownMap:
     def next_lane(self, lane: Lane) -> Lane | None:
         """The lane that continues ``lane`` on the neighbouring tile (straight through at
         intersections), or None where the road ends."""
+        key = _lane_key(lane)
+        if key in self._next_lanes:
+            return self._next_lanes[key]
+        return self._find_next_lane(lane)
+
+    def _find_next_lane(self, lane: Lane) -> Lane | None:
         dx, dy = UNIT[lane.exit]
         column, row = lane.column + int(dx), lane.row - int(dy)
         candidates = self._lanes.get((column, row, OPPOSITE[lane.exit]))
@@ -178,13 +199,16 @@ class DuckietownMap:
 
     def curvature_ahead(self, pose: LanePose, distances: tuple[float, ...]) -> list[float]:
         """Lane curvature (1/m) at each distance (m) ahead of ``pose`` along its lane."""
+        ahead: list[Lane | None] = [pose.lane]  # the lanes from here on, found as needed
         out = []
         for d in distances:
-            lane, remaining = pose.lane, pose.along + d
-            while lane is not None and remaining > lane.length:
-                remaining -= lane.length
-                lane = self.next_lane(lane)
-            out.append(0.0 if lane is None else lane.curvature)
+            k, remaining = 0, pose.along + d
+            while ahead[k] is not None and remaining > ahead[k].length:
+                remaining -= ahead[k].length
+                k += 1
+                if k == len(ahead):
+                    ahead.append(self.next_lane(ahead[k - 1]))
+            out.append(0.0 if ahead[k] is None else ahead[k].curvature)
         return out
 
     def lap_length(self, direction: str = "intended") -> float:
