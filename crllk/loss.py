@@ -246,8 +246,9 @@ class LagrangianPPOLoss(LossModule):
         log_ratio, dist = self._log_ratio(td)
         loss_objective, clip_fraction = self._clip_objective(log_ratio, advantage)
         entropy = _entropy(dist)
+        self._evaluate_critics(td)
         loss_critic, explained = self._value_loss(
-            self.critic_network, td, self.tensor_keys.value, self.tensor_keys.value_target
+            td, self.tensor_keys.value, self.tensor_keys.value_target
         )
         out = {
             "loss_objective": loss_objective,
@@ -261,7 +262,7 @@ class LagrangianPPOLoss(LossModule):
         }
         for name in self.cost_names:
             _, target_key, value_key = self.cost_keys(name)
-            loss, explained = self._value_loss(self.cost_critics[name], td, value_key, target_key)
+            loss, explained = self._value_loss(td, value_key, target_key)
             out["loss_cost_critic"] = out["loss_cost_critic"] + loss
             out[f"explained_variance_{name}"] = explained
         return TensorDict(out, batch_size=[])
@@ -283,16 +284,21 @@ class LagrangianPPOLoss(LossModule):
         clip_fraction = (clipped != log_ratio).to(log_ratio.dtype).mean().detach()
         return -gain.mean(), clip_fraction
 
+    def _evaluate_critics(self, td: TensorDictBase) -> None:
+        """Runs every distinct critic once on ``td``; one network with several value heads
+        (shared by the reward and the costs) runs only once."""
+        seen: set[int] = set()
+        for critic in (self.critic_network, *self.cost_critics.values()):
+            if id(critic) not in seen:
+                seen.add(id(critic))
+                critic(td)
+
     def _value_loss(
-        self,
-        critic: TensorDictModule,
-        td: TensorDictBase,
-        value_key: NestedKey,
-        target_key: NestedKey,
+        self, td: TensorDictBase, value_key: NestedKey, target_key: NestedKey
     ) -> tuple[torch.Tensor, torch.Tensor]:
         """c_v · mean((V(s) − G)²) and the explained variance 1 − Var(G − V) / Var(G)."""
         target = _column(_get(td, target_key), td.batch_size).detach()
-        value = _column(_get(critic(td), value_key), td.batch_size)
+        value = _column(_get(td, value_key), td.batch_size)
         loss = self.critic_coeff * (value - target).pow(2).mean()
         return loss, explained_variance(value.detach(), target)
 

@@ -42,12 +42,15 @@ class ModelConfig:
         feature_dim: width of the pixel encoder's output layer.
         initial_log_std: log standard deviation of the continuous actor's first actions
             (before the tanh squashing).
+        shared_critic: one encoder with a value head for the reward and each cost, instead
+            of one network per critic.
     """
 
     encoder: str = "fast"
     hidden: int = 64
     feature_dim: int = 256
     initial_log_std: float = -0.5
+    shared_critic: bool = False
 
 
 class PixelScale(nn.Module):
@@ -224,10 +227,32 @@ def make_critic(observation: str, observation_shape: Sequence[int], config: Mode
     return ValueOperator(net, in_keys=[observation], out_keys=[out_key])
 
 
+class _Heads(nn.Module):
+    """One encoder, one linear value head per output, returned as a tuple of [*B, 1]."""
+
+    def __init__(self, encoder: nn.Module, width: int, count: int):
+        super().__init__()
+        self.encoder = encoder
+        self.head = _head(width, count, gain=1.0)
+
+    def forward(self, observation: torch.Tensor) -> tuple[torch.Tensor, ...]:
+        return tuple(self.head(self.encoder(observation)).split(1, dim=-1))
+
+
+def make_shared_critic(observation: str, observation_shape: Sequence[int], config: ModelConfig,
+                       out_keys: Sequence[str],
+                       feature_names: Sequence[str] | None = None) -> ValueOperator:
+    """Value networks sharing one encoder: one head per key of ``out_keys`` (the reward's and
+    each cost's), so a pixel encoder runs once for all of them."""
+    encoder, width = make_encoder(observation, observation_shape, config, feature_names)
+    return ValueOperator(_Heads(encoder, width, len(out_keys)), in_keys=[observation],
+                         out_keys=list(out_keys))
+
+
 def count_parameters(module: nn.Module) -> int:
     """Number of trainable parameters."""
     return sum(p.numel() for p in module.parameters() if p.requires_grad)
 
 
 __all__ = ["ENCODERS", "ModelConfig", "count_parameters", "make_actor", "make_critic",
-           "make_encoder"]
+           "make_encoder", "make_shared_critic"]

@@ -45,7 +45,7 @@ from crllk.lagrange import Multiplier, make_multiplier
 from crllk.lane_keeping import state_feature_names
 from crllk.loss import AdvantageModules, LagrangianPPOLoss, make_advantage_modules
 from crllk.maps import read_yaml
-from crllk.models import ModelConfig, make_actor, make_critic
+from crllk.models import ModelConfig, make_actor, make_critic, make_shared_critic
 from crllk.paths import task_file, task_names
 from crllk.train_config import TrainConfig, validate
 
@@ -82,9 +82,13 @@ def build_learner(config: TrainConfig, env: BatchedLaneKeepingEnv) -> Learner:
     model = ModelConfig(**vars(config.model))
     names = state_feature_names(env.config) if obs == "state" else None
     actor = make_actor(obs, shape, config.action.name, env.action_spec, model, names)
-    critics = {"reward": make_critic(obs, shape, model, feature_names=names)}
-    critics |= {c: make_critic(obs, shape, model, out_key=f"state_value_{c}", feature_names=names)
-                for c in COSTS}
+    value_keys = {"reward": "state_value", **{c: f"state_value_{c}" for c in COSTS}}
+    if model.shared_critic:
+        shared = make_shared_critic(obs, shape, model, list(value_keys.values()), names)
+        critics = dict.fromkeys(value_keys, shared)
+    else:
+        critics = {name: make_critic(obs, shape, model, out_key=key, feature_names=names)
+                   for name, key in value_keys.items()}
     ppo = config.ppo
     loss = LagrangianPPOLoss(actor, critics["reward"], {c: critics[c] for c in COSTS},
                              clip_epsilon=ppo.clip_epsilon, entropy_coeff=ppo.entropy_coeff,
@@ -145,9 +149,9 @@ def ppo_update(learner: Learner, batch: TensorDictBase, config: TrainConfig,
     learner.advantages(batch)
     flat = batch.reshape(-1)
     size, sums, count = flat.shape[0], dict.fromkeys(LOSS_KEYS, 0.0), 0
-    groups = [list(learner.actor.parameters())]  # clip each network's gradient on its own,
-    groups += [list(critic.parameters()) for critic in learner.critics.values()]  # so large
-    # value errors do not shrink the policy's step
+    # clip each network's gradient on its own, so large value errors do not shrink the policy's
+    networks = {id(n): n for n in (learner.actor, *learner.critics.values())}  # step
+    groups = [list(network.parameters()) for network in networks.values()]
     for _ in range(config.ppo.epochs):
         order = torch.randperm(size, generator=generator)
         for start in range(0, size, config.ppo.minibatch_size):

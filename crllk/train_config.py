@@ -75,6 +75,7 @@ class ModelSchema:
     hidden: int = 64
     feature_dim: int = 256
     initial_log_std: float = -0.5
+    shared_critic: bool = False
 
 
 @dataclass

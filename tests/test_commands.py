@@ -38,3 +38,22 @@ def test_bench_prints_each_figure_with_its_bound(capsys):
     printed = capsys.readouterr().out
     assert "raw MuJoCo physics" in printed and "env, pixel observations" in printed
     assert printed.count("met") + printed.count("MISSED") == 2
+
+
+def test_bench_batched_and_training_figures(capsys, tmp_path):
+    """The batched-environment and training figures, and the time to satisfy both constraints
+    read from a run's eval.csv, at a tiny budget."""
+    from crllk import bench
+
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "eval.csv").write_text("iteration,frames,time_s,satisfied\n10,100,5.0,0\n"
+                                  "20,200,12.5,1\n30,300,20.0,1\n")
+    bench.main(["--steps", "8", "--num-envs", "2", "--batched", "--training",
+                "--iterations", "1", "--overrides", "num_envs=2", "rollout_steps=4",
+                "ppo.minibatch_size=4", "ppo.epochs=1", "--runs", str(run)])
+    printed = capsys.readouterr().out
+    assert "make_env state, num_envs=2" in printed and "make_env pixels, num_envs=2" in printed
+    assert "training, state (frames/s)" in printed and "training, pixels (frames/s)" in printed
+    assert printed.count("met") + printed.count("MISSED") == 6
+    assert f"{run}: 12 s (0.2 min) at 200 frames" in printed
