@@ -1,0 +1,96 @@
+"""Networks: shapes, the paper's CNN size, fixed feature scales, shared critic heads."""
+
+from __future__ import annotations
+
+import crllk  # noqa: F401  (headless GL before torchrl)
+
+import pytest
+import torch
+from tensordict import TensorDict
+from torchrl.data import Bounded, Categorical
+
+from crllk.models import (
+    ModelConfig,
+    make_actor,
+    make_critic,
+    make_shared_critic,
+    original_pixel_trunk,
+    state_feature_scales,
+)
+
+IMAGE = (30, 40, 3)
+
+
+def test_original_cnn_flattens_to_6912_features_at_30x40():
+    convs = original_pixel_trunk(IMAGE, 256)[0]
+    assert convs(torch.zeros(1, 3, 30, 40)).shape == (1, 6912)
+
+
+@pytest.mark.parametrize("encoder", ["fast", "original"])
+def test_pixel_actor_and_critic_keep_leading_batch_dimensions(encoder):
+    config = ModelConfig(encoder=encoder)
+    actor = make_actor("pixels", IMAGE, "discrete", Categorical(3), config)
+    critic = make_critic("pixels", IMAGE, config)
+    td = TensorDict({"pixels": torch.randint(0, 256, (2, 5, *IMAGE), dtype=torch.uint8)},
+                    batch_size=[2, 5])
+    actor(td)
+    critic(td)
+    assert td["action"].shape == (2, 5) and td["action"].max() < 3
+    assert td["action_log_prob"].shape == (2, 5)
+    assert td["state_value"].shape == (2, 5, 1)
+
+
+def test_continuous_actor_stays_in_bounds_and_starts_with_the_configured_spread():
+    spec = Bounded(-1.0, 1.0, shape=(2,))
+    actor = make_actor("state", (4,), "continuous", spec, ModelConfig(initial_log_std=-1.0))
+    td = TensorDict({"state": torch.randn(4096, 4) * 100}, batch_size=[4096])
+    actor(td)
+    assert td["action"].abs().max() <= 1.0
+    assert torch.allclose(td["scale"], torch.full_like(td["scale"], torch.exp(torch.tensor(-1.0))))
+
+
+def test_state_features_are_scaled_by_name():
+    scales = state_feature_scales(["lateral_offset", "yaw_rate", "duty_left_t-0", "unknown"])
+    assert scales.tolist() == pytest.approx([0.1, 1.5, 0.5, 1.0])
+    critic = make_critic("state", (4,), ModelConfig(), feature_names=[
+        "lateral_offset", "yaw_rate", "duty_left_t-0", "unknown"])
+    scale_layer = critic.module[0][0]
+    assert scale_layer(torch.tensor([0.05, 3.0, 0.25, 7.0])).tolist() == pytest.approx(
+        [0.5, 2.0, 0.5, 7.0])
+    with pytest.raises(ValueError, match="feature names"):
+        make_critic("state", (3,), ModelConfig(), feature_names=["lateral_offset"])
+
+
+def test_shared_critic_writes_one_value_per_head_from_one_encoder():
+    keys = ["state_value", "state_value_lane", "state_value_collision"]
+    critic = make_shared_critic("pixels", IMAGE, ModelConfig(), keys)
+    calls = []
+    critic.module.encoder.register_forward_hook(lambda *args: calls.append(1))
+    td = TensorDict({"pixels": torch.zeros((3, *IMAGE), dtype=torch.uint8)}, batch_size=[3])
+    critic(td)
+    assert len(calls) == 1
+    assert all(td[k].shape == (3, 1) for k in keys)
+    assert not torch.equal(td["state_value"], td["state_value_lane"]) or \
+        critic.module.head.weight.abs().sum() == 0
+
+
+def test_loss_runs_a_shared_critic_once_per_batch():
+    from crllk.loss import LagrangianPPOLoss
+
+    keys = ["state_value", "state_value_lane", "state_value_collision"]
+    critic = make_shared_critic("state", (4,), ModelConfig(), keys)
+    actor = make_actor("state", (4,), "discrete", Categorical(3), ModelConfig())
+    loss = LagrangianPPOLoss(actor, critic, {"lane": critic, "collision": critic})
+    calls = []
+    critic.module.encoder.register_forward_hook(lambda *args: calls.append(1))
+    n = 8
+    td = TensorDict({"state": torch.randn(n, 4)}, batch_size=[n])
+    with torch.no_grad():
+        actor(td)
+    for key in ("advantage", "value_target", "advantage_lane", "value_target_lane",
+                "advantage_collision", "value_target_collision"):
+        td[key] = torch.randn(n, 1)
+    out = loss(td)
+    assert len(calls) == 1
+    sum(out[k] for k in ("loss_objective", "loss_critic", "loss_cost_critic")).backward()
+    assert critic.module.head.weight.grad.abs().sum(dim=1).gt(0).all()  # every head learns
