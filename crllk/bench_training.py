@@ -11,18 +11,10 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-import torch
 from hydra import compose, initialize_config_module
 
 import crllk  # noqa: F401  (headless GL before torchrl)
-from crllk.train import (
-    build_env,
-    build_learner,
-    build_multipliers,
-    collect,
-    ppo_update,
-    shape_signals,
-)
+from crllk.train import build_run, collect, ppo_update, shape_signals
 from crllk.train_config import TrainConfig, validate
 
 
@@ -46,12 +38,7 @@ def bench_config(overrides: Sequence[str] = ()) -> TrainConfig:
 
 def training_rates(config: TrainConfig, iterations: int = 5) -> TrainingRates:
     """Times ``iterations`` training iterations and as many environment-only steps."""
-    torch.set_num_threads(config.threads)
-    torch.manual_seed(config.seed)
-    generator = torch.Generator().manual_seed(config.seed)
-    env = build_env(config, num_envs=config.num_envs, seed=config.seed)
-    learner = build_learner(config, env)
-    multipliers = build_multipliers(config)
+    env, learner, multipliers, generator = build_run(config)
     carry = env.reset()
 
     def iterate(td):

@@ -114,6 +114,17 @@ def build_multipliers(config: TrainConfig) -> dict[str, Multiplier]:
     return multipliers
 
 
+def build_run(config: TrainConfig) -> tuple[BatchedLaneKeepingEnv, Learner,
+                                            dict[str, Multiplier], torch.Generator]:
+    """Seeds torch and builds the environment, the learner, the multipliers and the generator
+    of minibatch orders, in this order (a resumed run rebuilds them the same way)."""
+    torch.set_num_threads(config.threads)
+    torch.manual_seed(config.seed)
+    generator = torch.Generator().manual_seed(config.seed)
+    env = build_env(config, num_envs=config.num_envs, seed=config.seed)
+    return env, build_learner(config, env), build_multipliers(config), generator
+
+
 # ----- one iteration -----------------------------------------------------------------------
 @torch.no_grad()
 def collect(env: BatchedLaneKeepingEnv, actor: torch.nn.Module, carry: TensorDictBase,
@@ -248,13 +259,7 @@ def train(config: TrainConfig) -> Path:
                               "resume=true to continue it or choose another run_dir")
         for stale in ("metrics.csv", "eval.csv"):  # killed before its first checkpoint
             (run_dir / stale).unlink(missing_ok=True)
-    torch.set_num_threads(config.threads)
-    torch.manual_seed(config.seed)
-    generator = torch.Generator().manual_seed(config.seed)
-
-    env = build_env(config, num_envs=config.num_envs, seed=config.seed)
-    learner = build_learner(config, env)
-    multipliers = build_multipliers(config)
+    env, learner, multipliers, generator = build_run(config)
     episodes = EpisodeAccumulator(config.num_envs)
     metrics = CsvLog(run_dir / "metrics.csv", metric_columns(config.action.name))
     evaluations = CsvLog(run_dir / "eval.csv", EVAL_COLUMNS)
