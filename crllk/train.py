@@ -54,6 +54,8 @@ COSTS = ("lane", "collision")
 DISCRETE_ACTION_NAMES = ("left", "right", "straight")
 RESUME_KEEPS = ("total_frames", "progress", "threads", "checkpoint_every")
 """Settings a resumed run takes from the command line; all others come from its config.yaml."""
+SOURCE_RUN = "run"
+"""How errors about the run directory name their source."""
 LOSS_KEYS = ("loss_objective", "loss_critic", "loss_cost_critic", "loss_entropy", "entropy",
              "kl_approx", "clip_fraction", "explained_variance", "explained_variance_lane",
              "explained_variance_collision")
@@ -341,8 +343,6 @@ def print_last_evaluation(path: Path, config: TrainConfig) -> None:
           f"(≤ {config.algo.lane.threshold}), J_coll {float(last['J_coll']):.3f} "
           f"(≤ {config.algo.collision.threshold}): {verdict}", flush=True)
 
-
-SOURCE_RUN = "run"
 
 
 def progress_text(row: dict[str, Any]) -> str:

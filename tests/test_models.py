@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import crllk  # noqa: F401  (headless GL before torchrl)
-
 import pytest
 import torch
 from tensordict import TensorDict
