@@ -71,7 +71,7 @@ class BatchedLaneKeepingEnv(EnvBase):
 
     def __init__(self, config: TaskConfig, *, num_envs: int = 1, observation: str = "pixels",
                  action: str = "discrete", seed: int | None = None,
-                 device: torch.device | str = "cpu"):
+                 privileged_state: bool = False, device: torch.device | str = "cpu"):
         if num_envs < 1:
             raise ValueError(f"num_envs must be at least 1, got {num_envs}")
         if observation not in OBSERVATIONS:
@@ -93,6 +93,9 @@ class BatchedLaneKeepingEnv(EnvBase):
         self.seeds: list[int] = []
         """The spawn seed of each sub-environment (see :func:`sub_env_seeds`)."""
         self._observations = np.zeros(self._observation_shape(), self._observation_dtype())
+        self.privileged_state = privileged_state and observation == "pixels"
+        """Whether pixel observations come with the ``"state"`` features too (for critics)."""
+        self._states = np.zeros((num_envs, len(state_feature_names(config))), np.float32)
         self._make_specs()
         self._set_seed(seed)
 
@@ -113,8 +116,11 @@ class BatchedLaneKeepingEnv(EnvBase):
             obs: TensorSpec = Bounded(0, 255, shape=shape, dtype=torch.uint8, device=self.device)
         else:
             obs = Unbounded(shape=shape, dtype=torch.float32, device=self.device)
-        self.observation_spec = Composite({self.observation_type: obs}, shape=n,
-                                          device=self.device)
+        entries = {self.observation_type: obs}
+        if self.privileged_state:
+            entries["state"] = Unbounded(shape=self._states.shape, dtype=torch.float32,
+                                         device=self.device)
+        self.observation_spec = Composite(entries, shape=n, device=self.device)
         if self.action_type == "discrete":
             self.action_spec = Categorical(3, shape=n, dtype=torch.int64, device=self.device)
         else:
@@ -145,16 +151,27 @@ class BatchedLaneKeepingEnv(EnvBase):
         for i in indices:
             self._reset_one(i)
         false = torch.zeros((self.num_envs, 1), dtype=torch.bool)
-        out = {self.observation_type: torch.from_numpy(self._observations.copy()),
-               **{key: false.clone() for key in DONE_KEYS}}
+        out = {**self._observation_entries(), **{key: false.clone() for key in DONE_KEYS}}
         return self._tensordict(out)
 
     def _reset_one(self, i: int) -> None:
         physics, task = self.physics[i], self.tasks[i]
         with physics.reset_context():
             task.initialize_episode(physics)
-        self._observations[i] = task.main_observation(physics)
+        self._observe(i, physics, task)
         self.step_counts[i] = 0
+
+    def _observe(self, i: int, physics: Physics, task: LaneKeeping) -> None:
+        """Store sub-environment ``i``'s observation (and privileged state features)."""
+        self._observations[i] = task.main_observation(physics)
+        if self.privileged_state:
+            self._states[i] = task.state_feature_list(physics)
+
+    def _observation_entries(self) -> dict[str, torch.Tensor]:
+        entries = {self.observation_type: torch.from_numpy(self._observations.copy())}
+        if self.privileged_state:
+            entries["state"] = torch.from_numpy(self._states.copy())
+        return entries
 
     def _step(self, tensordict: TensorDictBase) -> TensorDictBase:
         """One control step of every sub-environment.
@@ -169,7 +186,7 @@ class BatchedLaneKeepingEnv(EnvBase):
             physics.step(self.n_sub_steps)
         for i, (physics, task) in enumerate(zip(self.physics, self.tasks, strict=True)):
             task.after_step(physics)
-            self._observations[i] = task.main_observation(physics)
+            self._observe(i, physics, task)
         self.step_counts += 1
         return self._tensordict(self._step_outputs([task.outcome for task in self.tasks]))
 
@@ -180,8 +197,8 @@ class BatchedLaneKeepingEnv(EnvBase):
         reward, cost_lane, cost_collision = torch.from_numpy(rewards[:, :, None])
         terminated = np.array([[o.termination is not None] for o in outcomes])
         truncated = (self.step_counts >= self.config.horizon)[:, None] & ~terminated
-        return {self.observation_type: torch.from_numpy(self._observations.copy()),
-                "reward": reward, "cost_lane": cost_lane, "cost_collision": cost_collision,
+        return {**self._observation_entries(), "reward": reward, "cost_lane": cost_lane,
+                "cost_collision": cost_collision,
                 "terminated": torch.from_numpy(terminated),
                 "truncated": torch.from_numpy(truncated),
                 "done": torch.from_numpy(terminated | truncated)}
@@ -200,6 +217,7 @@ class BatchedLaneKeepingEnv(EnvBase):
                 "seeds": list(self.seeds),
                 "step_counts": self.step_counts.tolist(),
                 "observations": torch.from_numpy(self._observations.copy()),
+                "states": torch.from_numpy(self._states.copy()),
                 "sub_envs": [{"physics": physics.full_state(),
                               "instabilities": physics.instabilities,
                               "task": task.episode_state()}
@@ -224,11 +242,13 @@ class BatchedLaneKeepingEnv(EnvBase):
         self.seeds = list(state["seeds"])
         self.step_counts[:] = state["step_counts"]
         self._observations[:] = state["observations"].numpy()
+        self._states[:] = state["states"].numpy()
 
     def _identity(self) -> dict[str, Any]:
         """The constructor arguments a snapshot must agree on."""
         return {"task": self.config.name, "num_envs": self.num_envs,
-                "observation": self.observation_type, "action": self.action_type}
+                "observation": self.observation_type, "action": self.action_type,
+                "privileged_state": self.privileged_state}
 
     # ----- teardown ---------------------------------------------------------------------
     def close(self, *, raise_if_closed: bool = True) -> None:
@@ -251,7 +271,7 @@ def _build_physics(config: TaskConfig, num_envs: int, *, share_renderers: bool) 
 
 def make_env(task: str | Path, *, num_envs: int = 1, observation: str = "pixels",
              action: str = "discrete", seed: int | None = None,
-             overrides: dict[str, Any] | None = None,
+             overrides: dict[str, Any] | None = None, privileged_state: bool = False,
              device: torch.device | str = "cpu") -> BatchedLaneKeepingEnv:
     """A TorchRL environment with ``num_envs`` lane-keeping simulations in one process.
 
@@ -263,11 +283,15 @@ def make_env(task: str | Path, *, num_envs: int = 1, observation: str = "pixels"
             ((velocity, steering) in [-1, 1], shape ``[N, 2]``) or ``"duty"`` (wheel duties).
         seed: sub-environment ``i`` spawns from ``sub_env_seeds(seed, num_envs)[i]``.
         overrides: task settings to replace, e.g. ``{"horizon": 64}``.
+        privileged_state: with pixels, also return the ``"state"`` features (float32
+            ``[N, F]``) for critics that may see what the policy cannot (asymmetric
+            actor-critic); the policy still reads only ``"pixels"``.
         device: where the returned tensors live (simulation runs on the CPU).
     """
     config = load_task_config(task, overrides)
     return BatchedLaneKeepingEnv(config, num_envs=num_envs, observation=observation,
-                                 action=action, seed=seed, device=device)
+                                 action=action, seed=seed, privileged_state=privileged_state,
+                                 device=device)
 
 
 __all__ = ["COST_KEYS", "BatchedLaneKeepingEnv", "make_env", "sub_env_seeds"]

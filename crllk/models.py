@@ -44,6 +44,9 @@ class ModelConfig:
             (before the tanh squashing).
         shared_critic: one encoder with a value head for the reward and each cost, instead
             of one network per critic.
+        critic_input: what the critics read: ``"observation"`` (the policy's input) or
+            ``"state"`` (the lane-relative features, also with pixel policies: an asymmetric
+            actor-critic; critics only shape training, so the policy still drives from pixels).
     """
 
     encoder: str = "fast"
@@ -51,6 +54,7 @@ class ModelConfig:
     feature_dim: int = 256
     initial_log_std: float = -0.5
     shared_critic: bool = False
+    critic_input: str = "observation"
 
 
 class PixelScale(nn.Module):

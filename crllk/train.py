@@ -75,21 +75,28 @@ class Learner:
 
 def build_env(config: TrainConfig, *, num_envs: int, seed: int) -> BatchedLaneKeepingEnv:
     return make_env(config.task_source(), num_envs=num_envs, observation=config.obs.name,
-                    action=config.action.name, seed=seed, overrides=config.task_overrides())
+                    action=config.action.name, seed=seed, overrides=config.task_overrides(),
+                    privileged_state=config.model.critic_input == "state")
 
 
 def build_learner(config: TrainConfig, env: BatchedLaneKeepingEnv) -> Learner:
     obs = config.obs.name
     shape = env.observation_spec[obs].shape[1:]
     model = ModelConfig(**vars(config.model))
-    names = state_feature_names(env.config) if obs == "state" else None
-    actor = make_actor(obs, shape, config.action.name, env.action_spec, model, names)
+    names = state_feature_names(env.config)
+    actor = make_actor(obs, shape, config.action.name, env.action_spec, model,
+                       names if obs == "state" else None)
     value_keys = {"reward": "state_value", **{c: f"state_value_{c}" for c in COSTS}}
+    critic_obs = "state" if model.critic_input == "state" else obs
+    critic_shape = env.observation_spec[critic_obs].shape[1:]
+    critic_names = names if critic_obs == "state" else None
     if model.shared_critic:
-        shared = make_shared_critic(obs, shape, model, list(value_keys.values()), names)
+        shared = make_shared_critic(critic_obs, critic_shape, model, list(value_keys.values()),
+                                    critic_names)
         critics = dict.fromkeys(value_keys, shared)
     else:
-        critics = {name: make_critic(obs, shape, model, out_key=key, feature_names=names)
+        critics = {name: make_critic(critic_obs, critic_shape, model, out_key=key,
+                                     feature_names=critic_names)
                    for name, key in value_keys.items()}
     ppo = config.ppo
     loss = LagrangianPPOLoss(actor, critics["reward"], {c: critics[c] for c in COSTS},

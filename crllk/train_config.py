@@ -76,6 +76,7 @@ class ModelSchema:
     feature_dim: int = 256
     initial_log_std: float = -0.5
     shared_critic: bool = False
+    critic_input: str = "observation"
 
 
 @dataclass
@@ -142,6 +143,7 @@ _CHOICES = {
     "action.name": ("discrete", "continuous"),
     "obs.name": ("state", "pixels"),
     "model.encoder": ("fast", "original"),
+    "model.critic_input": ("observation", "state"),
 }
 _POSITIVE = ("total_frames", "num_envs", "rollout_steps", "threads", "checkpoint_every",
              "ppo.epochs", "ppo.minibatch_size", "ppo.lr", "ppo.max_grad_norm",

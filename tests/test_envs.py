@@ -232,3 +232,24 @@ def test_box_average_is_the_rounded_float_mean(factor):
     blocks = image.reshape(6, factor, 8, factor, 3)
     expected = (blocks.mean(axis=(1, 3), dtype=np.float32) + 0.5).astype(np.uint8)
     np.testing.assert_array_equal(box_average(image, factor), expected)
+
+
+def test_privileged_state_rides_along_with_pixels():
+    """Pixels with ``privileged_state`` also carry the ``state`` features, equal to those of a
+    state env driven by the same seed and actions; the specs still check out."""
+    pixels = make_env(TASK, num_envs=NUM_ENVS, observation="pixels", seed=3, overrides=SHORT,
+                      privileged_state=True)
+    state = make_env(TASK, num_envs=NUM_ENVS, observation="state", seed=3, overrides=SHORT)
+    try:
+        td_pixels, td_state = pixels.reset(), state.reset()
+        torch.testing.assert_close(td_pixels["state"], td_state["state"])
+        actions = torch.tensor([0, 2])
+        for _ in range(5):
+            td_pixels = pixels.step(td_pixels.set("action", actions))["next"]
+            td_state = state.step(td_state.set("action", actions))["next"]
+            torch.testing.assert_close(td_pixels["state"], td_state["state"])
+        assert td_pixels["pixels"].dtype == torch.uint8
+        check_env_specs(pixels, seed=None)
+    finally:
+        pixels.close()
+        state.close()
