@@ -12,30 +12,12 @@ from pathlib import Path
 
 import pytest
 import torch
-from hydra import compose, initialize_config_module
+from tiny_runs import FRAMES_PER_ITERATION, NUM_ENVS, TINY, compose_config, run_in_process
 
-import crllk  # noqa: F401  (headless GL before torchrl)
 from crllk.checkpoint import load_checkpoint
-from crllk.train import resolve_config, train
 from crllk.train_config import validate
 
 REPO = Path(__file__).resolve().parents[1]
-NUM_ENVS, ROLLOUT = 2, 8
-FRAMES_PER_ITERATION = NUM_ENVS * ROLLOUT
-TINY = [f"num_envs={NUM_ENVS}", f"rollout_steps={ROLLOUT}", "ppo.minibatch_size=8",
-        "ppo.epochs=2", "task.horizon=12", "progress=false", "checkpoint_every=1"]
-
-
-def compose_config(overrides: list[str]):
-    with initialize_config_module(config_module="crllk.conf", version_base="1.3"):
-        return compose(config_name="train", overrides=overrides)
-
-
-def run_in_process(run_dir: Path, iterations: int, extra: list[str] = (), *,
-                   frames_per_iteration: int = FRAMES_PER_ITERATION) -> Path:
-    cfg = compose_config([*TINY, f"run_dir={run_dir}",
-                          f"total_frames={iterations * frames_per_iteration}", *extra])
-    return train(resolve_config(cfg))
 
 
 def read_rows(path: Path) -> list[dict[str, str]]:

@@ -1,0 +1,404 @@
+"""The paper's experiments, trained and evaluated from one command each.
+
+    python -m crllk.experiments table1    # CRLLK-D, PPO-D, CRLLK-C, PPO-C on small_loop
+    python -m crllk.experiments maps      # CRLLK-D vs PPO-D on zigzag and obstacle_loop
+    python -m crllk.experiments figure1   # CRLLK-D on small_loop with alpha_1 = 0.5 and 0.75
+    python -m crllk.experiments all
+
+Every run trains in its own ``python -m crllk.train ... resume=true`` process, ``--jobs`` at a
+time (one per core), so an interrupted experiment picks up where its runs stopped and finished
+runs are not trained again. Each run is then evaluated (``python -m crllk.evaluate``; an
+``eval.json`` of the same checkpoint and settings is reused) and the results are written to
+``results/``: a Markdown table with the paper's numbers beside ours and the JSON behind it, or
+the figures.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import subprocess
+import sys
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import torch
+
+from crllk.checkpoint import atomic_write_text
+from crllk.evaluate import DEFAULT_SEED, aggregate, evaluate_follower
+from crllk.runs import CHECKPOINT_FILE, EVAL_FILE, read_eval_json
+
+THRESHOLDS = {"lane": 0.5, "collision": 0.02}
+"""alpha_1 (dm) and alpha_2 (collisions per episode) of the paper's Table 1."""
+AGENTS = {
+    "CRLLK-D": ("algo=crllk", "action=discrete"),
+    "PPO-D": ("algo=ppo", "action=discrete"),
+    "CRLLK-C": ("algo=crllk", "action=continuous"),
+    "PPO-C": ("algo=ppo", "action=continuous"),
+}
+"""The four agents of Table 1 as trainer overrides."""
+PAPER_TABLE1 = {
+    "CRLLK-D": {"J_clane": (0.66, 0.02), "J_coll": (0.17, 0.00), "J_R": (69.0, 0.6)},
+    "PPO-D": {"J_clane": (0.99, 0.07), "J_coll": (0.38, 0.04), "J_R": (46.6, 3.2)},
+    "CRLLK-C": {"J_clane": (0.31, 0.00), "J_coll": (0.05, 0.01), "J_R": (62.4, 22.2)},
+    "PPO-C": {"J_clane": (1.04, 0.25), "J_coll": (0.34, 0.20), "J_R": (51.3, 14.8)},
+}
+"""The paper's Table 1 (mean ± std over two seeds, 100 test episodes)."""
+PAPER_J_R_PER_METRE = 30.0
+"""The original reward summed speed x cos(heading) per 30 Hz step: about 30 per metre."""
+MAP_TASKS = ("zigzag", "obstacle_loop")
+MAP_AGENTS = ("CRLLK-D", "PPO-D")
+FIGURE_THRESHOLDS = (0.5, 0.75)
+
+
+@dataclass(frozen=True)
+class RunSpec:
+    """One training run of an experiment."""
+
+    agent: str
+    task: str
+    seed: int
+    lane_threshold: float = THRESHOLDS["lane"]
+    extra: tuple[str, ...] = ()
+
+    def directory(self, root: Path) -> Path:
+        return root / self.task / f"{self.agent}-a{self.lane_threshold:g}-seed{self.seed}"
+
+    def log(self, root: Path) -> Path:
+        return self.directory(root).parent / f"{self.directory(root).name}.log"
+
+    def train_command(self, root: Path, settings: Settings) -> list[str]:
+        return [sys.executable, "-m", "crllk.train", f"task={self.task}", *AGENTS[self.agent],
+                f"obs={settings.obs}", f"seed={self.seed}",
+                f"algo.lane.threshold={self.lane_threshold}",
+                f"algo.collision.threshold={THRESHOLDS['collision']}",
+                f"total_frames={settings.frames}", f"run_dir={self.directory(root)}",
+                "resume=true", "progress=false", "threads=1", *settings.train_overrides,
+                *self.extra]
+
+
+@dataclass(frozen=True)
+class Settings:
+    """Budget and evaluation of an experiment."""
+
+    frames: int = 300_000
+    seeds: tuple[int, ...] = (0, 1)
+    episodes: int = 100
+    obs: str = "state"
+    jobs: int = 2
+    runs_root: Path = Path("runs/experiments")
+    results: Path = Path("results")
+    eval_seed: int = DEFAULT_SEED
+    command: str = ""
+    train_overrides: tuple[str, ...] = ()
+
+
+@dataclass
+class Outcome:
+    """Evaluations of the runs of an experiment, by run."""
+
+    documents: dict[RunSpec, dict[str, Any]] = field(default_factory=dict)
+    wall_s: float = 0.0
+
+
+# ----- running ------------------------------------------------------------------------------
+def trained_frames(run_dir: Path) -> int:
+    """Frames in the run's last checkpoint (0 without one)."""
+    path = run_dir / CHECKPOINT_FILE
+    if not path.is_file():
+        return 0
+    return int(torch.load(path, map_location="cpu", weights_only=False)["frames"])
+
+
+def evaluation_is_current(run_dir: Path, settings: Settings) -> bool:
+    """Whether ``eval.json`` evaluated the last checkpoint with these settings."""
+    if not (run_dir / EVAL_FILE).is_file():
+        return False
+    document = read_eval_json(run_dir)
+    evaluation = document.get("evaluation", {})
+    return (document.get("source", {}).get("frames") == trained_frames(run_dir)
+            and evaluation.get("episodes") == settings.episodes
+            and evaluation.get("seed") == settings.eval_seed
+            and evaluation.get("deterministic") is True)
+
+
+def run_parallel(commands: Sequence[tuple[list[str], Path]], jobs: int) -> list[str]:
+    """Runs ``(command, log file)`` pairs, ``jobs`` at a time; returns the failures."""
+    pending, running, failures = list(commands), [], []
+    while pending or running:
+        while pending and len(running) < jobs:
+            command, log = pending.pop(0)
+            log.parent.mkdir(parents=True, exist_ok=True)
+            handle = log.open("a")
+            print(f"  start: {' '.join(command[2:])}  (log: {log})", flush=True)
+            running.append((subprocess.Popen(command, stdout=handle, stderr=subprocess.STDOUT,
+                                             env=_child_env()), handle, command, log))
+        time.sleep(0.5)
+        for entry in list(running):
+            process, handle, command, log = entry
+            if process.poll() is not None:
+                handle.close()
+                running.remove(entry)
+                if process.returncode != 0:
+                    failures.append(f"{' '.join(command[2:])} exited {process.returncode}; "
+                                    f"see {log}")
+    return failures
+
+
+def _child_env() -> dict[str, str]:
+    """Each child uses one core: ``jobs`` children share the machine without oversubscribing."""
+    return {**os.environ, "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
+
+
+def train_and_evaluate(specs: Sequence[RunSpec], settings: Settings) -> Outcome:
+    """Trains the unfinished runs, evaluates the unevaluated ones, returns every evaluation."""
+    started = time.perf_counter()
+    root = settings.runs_root
+    to_train = [s for s in specs if trained_frames(s.directory(root)) < settings.frames]
+    print(f"training {len(to_train)} of {len(specs)} runs ({settings.jobs} at a time)",
+          flush=True)
+    failures = run_parallel([(s.train_command(root, settings),
+                              s.log(root)) for s in to_train],
+                            settings.jobs)
+    to_evaluate = [s for s in specs if not evaluation_is_current(s.directory(root), settings)]
+    print(f"evaluating {len(to_evaluate)} of {len(specs)} runs", flush=True)
+    failures += run_parallel(
+        [([sys.executable, "-m", "crllk.evaluate", f"run={s.directory(root)}",
+           f"episodes={settings.episodes}", f"seed={settings.eval_seed}"],
+          s.log(root)) for s in to_evaluate], settings.jobs)
+    if failures:
+        raise RuntimeError("some runs failed:\n" + "\n".join(failures))
+    documents = {s: read_eval_json(s.directory(root)) for s in specs}
+    return Outcome(documents, time.perf_counter() - started)
+
+
+# ----- tables -------------------------------------------------------------------------------
+def agent_results(outcome: Outcome, task: str, agents: Sequence[str],
+                  lane_threshold: float = THRESHOLDS["lane"]) -> dict[str, dict[str, Any]]:
+    """Mean ± std across seeds per agent, with the training budget actually spent."""
+    results = {}
+    for agent in agents:
+        docs = [d for s, d in outcome.documents.items()
+                if s.agent == agent and s.task == task and s.lane_threshold == lane_threshold]
+        if docs:
+            summary = aggregate(docs)
+            summary["train_seconds"] = [d["source"]["elapsed_s"] for d in docs]
+            summary["frames"] = [d["source"]["frames"] for d in docs]
+            summary["multipliers"] = [d["source"]["multipliers"] for d in docs]
+            summary["action_histogram"] = [d["action_histogram"] for d in docs]
+            results[agent] = summary
+    return results
+
+
+def _cell(entry: dict[str, float], digits: int) -> str:
+    return f"{entry['mean']:.{digits}f} ± {entry['std']:.{digits}f}"
+
+
+def verdicts(results: dict[str, dict[str, Any]], constrained: Sequence[str],
+             thresholds: dict[str, float]) -> list[str]:
+    """One sentence per constrained agent: satisfied, or by how much each constraint misses."""
+    lines = []
+    for agent in constrained:
+        if agent not in results:
+            continue
+        lane, coll = results[agent]["J_clane"]["mean"], results[agent]["J_coll"]["mean"]
+        misses = []
+        if lane > thresholds["lane"]:
+            misses.append(f"J_clane by {lane - thresholds['lane']:.3f} dm")
+        if coll > thresholds["collision"]:
+            misses.append(f"J_coll by {coll - thresholds['collision']:.3f}")
+        per_seed = ", ".join("yes" if s else "no" for s in results[agent]["satisfied"])
+        if misses:
+            lines.append(f"- {agent} misses on average: {'; '.join(misses)} "
+                         f"(both hold per seed: {per_seed}).")
+        else:
+            lines.append(f"- {agent} satisfies both constraints on average "
+                         f"(both hold per seed: {per_seed}).")
+    return lines
+
+
+def comparisons(results: dict[str, dict[str, Any]], pairs: Sequence[tuple[str, str]],
+                ) -> list[str]:
+    """Constrained agent against its fixed-weight baseline, as measured."""
+    lines = []
+    for ours, baseline in pairs:
+        if ours not in results or baseline not in results:
+            continue
+        a, b = results[ours], results[baseline]
+        lines.append(
+            f"- {ours} vs {baseline}: J_R {a['J_R']['mean']:.2f} vs {b['J_R']['mean']:.2f} m, "
+            f"J_clane {a['J_clane']['mean']:.3f} vs {b['J_clane']['mean']:.3f} dm, "
+            f"J_coll {a['J_coll']['mean']:.3f} vs {b['J_coll']['mean']:.3f}.")
+    return lines
+
+
+def machine_text() -> str:
+    cpu = platform.processor() or platform.machine()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    return f"{os.cpu_count()} CPU cores ({cpu}), no GPU, Python {platform.python_version()}"
+
+
+def table_markdown(document: dict[str, Any]) -> str:
+    """The Markdown table of an experiment from its JSON document (see :func:`write_table`)."""
+    results, follower, paper = document["agents"], document["follower"], document["paper"]
+    settings, thresholds = document["settings"], document["thresholds"]
+    agents = list(results)
+    header = "| metric | " + " | ".join(agents) + " | lane follower |"
+    rule = "| --- " * (len(agents) + 2) + "|"
+    rows = []
+    for metric, label, digits in (
+            ("J_clane", f"J_clane (dm, ≤ {thresholds['lane']})", 3),
+            ("J_coll", f"J_coll (per episode, ≤ {thresholds['collision']})", 3),
+            ("J_R", "J_R (m per episode)", 2),
+            ("episode_length", "episode length (steps)", 0)):
+        cells = [_cell(results[a][metric], digits) for a in agents]
+        cells.append(f"{follower[metric]:.{digits}f}")
+        rows.append(f"| {label} | " + " | ".join(cells) + " |")
+        if paper and metric in ("J_clane", "J_coll", "J_R"):
+            paper_digits = 1 if metric == "J_R" else 2
+            paper_cells = [f"{paper[a][metric][0]:.{paper_digits}f} ± "
+                           f"{paper[a][metric][1]:.{paper_digits}f}" for a in agents]
+            suffix = " (paper, ≈ 30 per m)" if metric == "J_R" else " (paper)"
+            rows.append(f"| {metric}{suffix} | " + " | ".join(paper_cells) + " | |")
+    minutes = [s / 60 for a in agents for s in results[a]["train_seconds"]]
+    obs = settings["obs"]
+    lines = [
+        f"# {document['title']}", "",
+        f"Map `{document['task']}`, α1 = {thresholds['lane']} dm, α2 = "
+        f"{thresholds['collision']} collisions per episode. Mean ± std (population, ddof 0) "
+        f"across training seeds {', '.join(map(str, settings['seeds']))}.", "",
+        f"- Observation: `{obs}`" + (" (lane-relative features, not the camera)"
+                                     if obs == "state" else " (the 30×40 camera image)") + ".",
+        f"- Budget: {settings['frames']:,} environment frames per run (training wall time "
+        f"{min(minutes):.1f}–{max(minutes):.1f} min per run, {settings['jobs']} runs at a "
+        "time).",
+        f"- Evaluation: {settings['episodes']} deterministic episodes per run, spawn seed "
+        f"{settings['eval_seed']} (never a training seed), the last checkpoint.",
+        f"- Command: `{settings['command']}` ({document['wall_s'] / 60:.1f} min wall for the "
+        "invocation that finished it; finished runs are reused).",
+        f"- Machine: {settings['machine']}.", "",
+        header, rule, *rows, "",
+    ]
+    if paper:
+        lines += ["The paper's J_R is the sum of its per-step reward (speed × cos(heading) at "
+                  "30 Hz), about 30 per metre; ours is metres along the lane. Its episodes "
+                  "also end on leaving a road tile or hitting an object, after at most 512 "
+                  "steps.", ""]
+    constrained = [a for a in agents if a.startswith("CRLLK")]
+    lines += ["Constraints (mean over seeds):", "",
+              *verdicts(results, constrained, thresholds)]
+    if document["pairs"]:
+        lines += ["", "Against the fixed-weight baselines (same budget):", "",
+                  *comparisons(results, document["pairs"])]
+    lines += ["", "The lane follower is the scripted controller (true pose, privileged), "
+              "evaluated through the same episodes and metrics as a reference."]
+    return "\n".join(lines) + "\n"
+
+
+def write_table(name: str, title: str, task: str, agents: Sequence[str], outcome: Outcome,
+                settings: Settings, paper: dict[str, Any] | None,
+                pairs: Sequence[tuple[str, str]]) -> Path:
+    """Writes ``results/<name>.json`` (everything behind the table) and ``<name>.md``."""
+    follower = evaluate_follower(task, episodes=settings.episodes, seed=settings.eval_seed,
+                                 thresholds=dict(THRESHOLDS))
+    document = {"title": title, "task": task, "thresholds": THRESHOLDS,
+                "settings": _settings_dict(settings), "wall_s": outcome.wall_s,
+                "agents": agent_results(outcome, task, agents),
+                "follower": follower["summary"], "paper": paper,
+                "pairs": [list(p) for p in pairs],
+                "runs": {str(s.directory(settings.runs_root)): d["summary"]
+                         for s, d in outcome.documents.items() if s.task == task}}
+    settings.results.mkdir(parents=True, exist_ok=True)
+    path = settings.results / f"{name}.md"
+    atomic_write_text(path.with_suffix(".json"), json.dumps(document, indent=1) + "\n")
+    markdown = table_markdown(document)
+    atomic_write_text(path, markdown)
+    print(markdown, flush=True)
+    return path
+
+
+def _settings_dict(settings: Settings) -> dict[str, Any]:
+    return {"frames": settings.frames, "seeds": list(settings.seeds),
+            "train_overrides": list(settings.train_overrides),
+            "episodes": settings.episodes, "obs": settings.obs, "eval_seed": settings.eval_seed,
+            "jobs": settings.jobs, "command": settings.command, "machine": machine_text()}
+
+
+# ----- experiments --------------------------------------------------------------------------
+def table1(settings: Settings) -> Path:
+    specs = [RunSpec(agent, "small_loop", seed) for agent in AGENTS for seed in settings.seeds]
+    outcome = train_and_evaluate(specs, settings)
+    return write_table("table1", "Table 1: small_loop", "small_loop", list(AGENTS), outcome,
+                       settings, PAPER_TABLE1, [("CRLLK-D", "PPO-D"), ("CRLLK-C", "PPO-C")])
+
+
+def maps(settings: Settings) -> list[Path]:
+    specs = [RunSpec(agent, task, seed) for task in MAP_TASKS for agent in MAP_AGENTS
+             for seed in settings.seeds]
+    outcome = train_and_evaluate(specs, settings)
+    return [write_table(f"table_{task}", f"CRLLK vs PPO with discrete actions: {task}", task,
+                        MAP_AGENTS, outcome, settings, None, [("CRLLK-D", "PPO-D")])
+            for task in MAP_TASKS]
+
+
+def figure1(settings: Settings) -> list[Path]:
+    from crllk.figures import figure1_pictures  # matplotlib only when drawing
+
+    specs = [RunSpec("CRLLK-D", "small_loop", seed, threshold)
+             for threshold in FIGURE_THRESHOLDS for seed in settings.seeds]
+    train_and_evaluate(specs, settings)
+    by_threshold = {t: [s.directory(settings.runs_root) for s in specs if s.lane_threshold == t]
+                    for t in FIGURE_THRESHOLDS}
+    return figure1_pictures(by_threshold, settings.results, _settings_dict(settings))
+
+
+EXPERIMENTS = {"table1": table1, "maps": maps, "figure1": figure1}
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("experiment", choices=[*EXPERIMENTS, "all"])
+    parser.add_argument("--frames", type=int, default=Settings.frames,
+                        help="environment frames per training run")
+    parser.add_argument("--seeds", type=int, nargs="+", default=list(Settings.seeds))
+    parser.add_argument("--episodes", type=int, default=Settings.episodes,
+                        help="evaluation episodes per run")
+    parser.add_argument("--obs", choices=("state", "pixels"), default=Settings.obs)
+    parser.add_argument("--jobs", type=int, default=Settings.jobs, help="runs at a time")
+    parser.add_argument("--runs-root", type=Path, default=Settings.runs_root,
+                        help="runs go to <runs-root>/<obs>/<task>/<agent>-a<alpha_1>-seed<seed>")
+    parser.add_argument("--results", type=Path, default=Settings.results)
+    parser.add_argument("--set", nargs="*", default=[], metavar="KEY=VALUE",
+                        help="extra trainer overrides for every run, e.g. ppo.epochs=5")
+    args = parser.parse_args(argv)
+    for name in ("frames", "episodes", "jobs"):
+        if getattr(args, name) < 1:
+            parser.error(f"--{name} must be at least 1, got {getattr(args, name)}")
+    command = "python -m crllk.experiments " + " ".join(sys.argv[1:] if argv is None else argv)
+    settings = Settings(frames=args.frames, seeds=tuple(args.seeds), episodes=args.episodes,
+                        obs=args.obs, jobs=args.jobs, runs_root=args.runs_root / args.obs,
+                        results=args.results, command=command,
+                        train_overrides=tuple(args.set))
+    names = list(EXPERIMENTS) if args.experiment == "all" else [args.experiment]
+    try:
+        for name in names:
+            EXPERIMENTS[name](settings)
+    except RuntimeError as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

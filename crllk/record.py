@@ -1,0 +1,732 @@
+"""Rerun recordings of lane-keeping episodes: the map, the robot, its camera and every signal.
+
+    python -m crllk.record --task obstacle_loop --episodes 1 --out rec.rrd [--viewer spawn]
+
+:func:`record_episodes` plays episodes of sub-environment 0 of a
+:class:`~crllk.envs.BatchedLaneKeepingEnv` and logs them to a ``.rrd`` file and/or a live
+viewer. This is the only module of crllk that imports rerun.
+
+Timelines: ``step`` (control steps since the recording began), ``sim_time`` (simulated seconds
+since the recording began, ``step`` x control timestep), ``episode`` (index of the episode in
+the recording) and, when given, ``iteration`` (the training iteration: one value per file, so
+that files of one training run sharing a ``recording_id`` line up on it when opened together).
+
+Entity paths (:data:`ENTITY_PATHS`, plus :data:`ACTION_ENTITY_PATHS` for the env's action type
+and ``lagrange/<name>`` per multiplier): the map under ``world/map`` (static), the robot's pose
+``world/robot`` (one row per step) with its footprint and camera (a pinhole carrying the camera
+image), the trail of the current episode ``world/trail``, per-step scalars ``reward/...``,
+``cost/...``, ``lane_pose/...``, ``action/...``, ``lagrange/...``, per-episode scalars
+``episode/...`` and the text events ``events`` (episode starts, ends and their reasons).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import re
+import shutil
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+import warnings
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import rerun as rr
+import rerun.blueprint as rrb
+import torch
+from rerun.chunk import RrdReader
+from tensordict import TensorDictBase
+from torchrl.envs.utils import ExplorationType, set_exploration_type, step_mdp
+
+from crllk.episodes import EpisodeAccumulator, EpisodeStats
+from crllk.maps import DuckietownMap, Lane
+from crllk.maps.lanes import LANE_OFFSET, OPPOSITE, RIGHT_OF
+from crllk.maps.road import openings
+from crllk.sim import constants as C
+from crllk.sim.texture import (
+    _DASH_LENGTH,
+    _GAP_LENGTH,
+    _WHITE_INNER,
+    _WHITE_WIDTH,
+    DECOR_RGB,
+    ROAD_RGB,
+    WHITE_RGB,
+    YELLOW_RGB,
+)
+
+# ----- entity paths -----------------------------------------------------------------------
+TILES = "world/map/tiles"
+LANES = "world/map/lanes"
+WHITE_MARKINGS = "world/map/markings/white"
+YELLOW_MARKINGS = "world/map/markings/yellow"
+OBJECTS = "world/map/objects"
+ROBOT = "world/robot"
+FOOTPRINT = "world/robot/footprint"
+CAMERA = "world/robot/camera"
+IMAGE = "world/robot/camera/image"
+TRAIL = "world/trail"
+REWARD = "reward/progress"
+COST_LANE = "cost/lane"
+COST_COLLISION = "cost/collision"
+LATERAL = "lane_pose/lateral"
+HEADING_ERROR = "lane_pose/heading_error"
+EVENTS = "events"
+EPISODE_DISTANCE = "episode/distance"
+EPISODE_LANE_COST = "episode/lane_cost"
+EPISODE_COLLISIONS = "episode/collisions"
+EPISODE_LENGTH = "episode/length"
+LAGRANGE_PREFIX = "lagrange/"
+"""Multiplier ``name`` is logged at ``lagrange/<name>`` (``lagrange/lane``, ...)."""
+
+MAP_ENTITY_PATHS = (TILES, LANES, WHITE_MARKINGS, YELLOW_MARKINGS, OBJECTS)
+STEP_ENTITY_PATHS = (ROBOT, IMAGE, TRAIL, REWARD, COST_LANE, COST_COLLISION, LATERAL,
+                     HEADING_ERROR)
+EPISODE_ENTITY_PATHS = (EPISODE_DISTANCE, EPISODE_LANE_COST, EPISODE_COLLISIONS, EPISODE_LENGTH)
+ENTITY_PATHS = (*MAP_ENTITY_PATHS, FOOTPRINT, CAMERA, *STEP_ENTITY_PATHS, EVENTS,
+                *EPISODE_ENTITY_PATHS)
+"""Every entity path a recording holds, whatever the action type and multipliers."""
+ACTION_ENTITY_PATHS = {"discrete": ("action/index",),
+                       "continuous": ("action/velocity", "action/steering"),
+                       "duty": ("action/duty_left", "action/duty_right")}
+"""The action's scalar paths per action type (discrete: 0 left, 1 right, 2 straight)."""
+
+# ----- constants --------------------------------------------------------------------------
+VIEWERS = ("none", "spawn", "serve")
+VIEWER_HOST = "127.0.0.1"
+"""Spawned and served viewers listen on this address only."""
+VIEWER_PORT = 9876
+"""gRPC port of a spawned or served viewer."""
+_SPAWN_TIMEOUT = 15.0
+"""How long a spawned viewer may take to listen (s)."""
+_SPAWN_GRACE = 1.0
+"""A spawned viewer must still run this long after it listens (s); one without a display
+listens first and exits right after."""
+_LINE_SPACING = 0.02
+"""Sample spacing of lane and marking polylines (m)."""
+_MARKING_HEIGHT = 0.002
+_LANE_HEIGHT = 0.004
+"""Heights of marking and lane-centre lines above the floor (m), drawn over the tiles."""
+_TILE_THICKNESS = 0.002
+"""Tiles are flat boxes this thick, top face at z = 0 (m)."""
+_SCALAR_BATCH = 30
+"""Per-step scalars are sent every this many steps (1 s of simulation at 30 Hz) and at the end
+of every episode."""
+_CAMERA_PLANE = 0.08
+"""Distance of the camera image plane drawn in 3D from the camera (m)."""
+_ANSI = re.compile(r"\x1b\[[0-9;]*m")
+"""Terminal colour codes in the viewer's log."""
+_LANE_RGB = (230, 40, 200)
+_TRAIL_RGB = (40, 170, 255)
+_ROBOT_RGB = (250, 215, 40)
+_OBJECT_RGB = (255, 110, 20)
+
+
+class RecordingError(ValueError):
+    """A recording that cannot be written; reads ``<path>: cannot write the recording: ...``
+    (like :class:`crllk.errors.ConfigError`, one line naming the file and the problem)."""
+
+    def __init__(self, path: str | Path, reason: str) -> None:
+        self.path = str(path)
+        self.reason = reason
+        super().__init__(f"{self.path}: cannot write the recording: {reason}")
+
+
+@dataclass(frozen=True)
+class RecordingReport:
+    """What :func:`record_episodes` did."""
+
+    path: Path | None
+    """The ``.rrd`` file written (None: live viewer only)."""
+    steps: int
+    """Control steps logged (one ``world/robot`` row each)."""
+    episodes: int
+    """Episodes of sub-environment 0 played and logged."""
+    logging_seconds: float
+    """Time spent inside rerun calls, sinks, static map and final flush included (s)."""
+    render_seconds: float = 0.0
+    """Time spent rendering camera images for state observations (s)."""
+    warnings: tuple[str, ...] = ()
+    """Problems that did not stop the recording (an unreachable viewer)."""
+    episode_stats: tuple[EpisodeStats, ...] = ()
+    """The logged episodes' statistics, as :class:`~crllk.episodes.EpisodeAccumulator` sums."""
+    viewer_url: str | None = None
+    """Where a live viewer received or served the recording."""
+
+
+# ----- map geometry -----------------------------------------------------------------------
+def lane_polyline(lane: Lane, lateral: float = 0.0, start: float = 0.0,
+                  stop: float | None = None, z: float = 0.0) -> np.ndarray:
+    """Points ``[K, 3]`` along ``lane`` from ``start`` to ``stop`` m (default: its end),
+    ``lateral`` m right of its centre line, at height ``z`` (m)."""
+    stop = lane.length if stop is None else stop
+    count = max(2, math.ceil((stop - start) / _LINE_SPACING) + 1)
+    points = [lane.point_at(a, lateral)[:2] for a in np.linspace(start, stop, count)]
+    return np.column_stack([np.asarray(points), np.full(count, z)])
+
+
+def lane_centre_strips(dmap: DuckietownMap) -> list[np.ndarray]:
+    """The centre line of every lane of the map (both directions, every turn)."""
+    return [lane_polyline(lane, z=_LANE_HEIGHT) for lane in dmap.lanes]
+
+
+def white_lateral(tile_size: float) -> float:
+    """Offset of the white edge tape's middle right of the lane centre (m), as the floor
+    texture (:mod:`crllk.sim.texture`) paints it."""
+    return tile_size / 2 - _WHITE_INNER - _WHITE_WIDTH / 2 - LANE_OFFSET
+
+
+def white_marking_strips(dmap: DuckietownMap) -> list[np.ndarray]:
+    """White edge tape: right of every lane on straights and curves; along the closed side of
+    intersections (right of the straight lanes whose right side has no opening)."""
+    lateral = white_lateral(dmap.tile_size)
+    strips = []
+    for lane in dmap.lanes:
+        tile = dmap.tile(lane.column, lane.row)
+        heading = OPPOSITE[lane.entry]
+        closed_right = lane.turn == 0 and RIGHT_OF[heading] not in openings(tile)
+        if tile.kind in ("straight", "curve_left", "curve_right") or closed_right:
+            strips.append(lane_polyline(lane, lateral, z=_MARKING_HEIGHT))
+    return strips
+
+
+def yellow_marking_strips(dmap: DuckietownMap) -> list[np.ndarray]:
+    """Dashed yellow centre tape of straights and curves (one dash per strip), drawn along one
+    lane of each tile at the road centre line."""
+    strips = []
+    period = _DASH_LENGTH + _GAP_LENGTH
+    for tile in dmap.road_tiles:
+        if tile.kind not in ("straight", "curve_left", "curve_right"):
+            continue
+        lane = dmap.tile_lanes(tile.column, tile.row)[0]
+        for start in np.arange(0.0, lane.length, period):
+            stop = min(start + _DASH_LENGTH, lane.length)
+            strips.append(lane_polyline(lane, -LANE_OFFSET, start, stop, _MARKING_HEIGHT))
+    return strips
+
+
+def tile_boxes(dmap: DuckietownMap) -> rr.Boxes3D:
+    """Every tile as a flat solid box coloured as the floor texture colours it."""
+    s = dmap.tile_size
+    tiles = [t for row in dmap.spec.tiles for t in row]
+    centres = [((t.column + 0.5) * s, (dmap.rows - t.row - 0.5) * s, -_TILE_THICKNESS / 2)
+               for t in tiles]
+    colours = [ROAD_RGB if t.drivable else DECOR_RGB[t.kind] for t in tiles]
+    half_size = (s / 2, s / 2, _TILE_THICKNESS / 2)
+    return rr.Boxes3D(centers=centres, half_sizes=[half_size] * len(tiles), colors=colours,
+                      fill_mode="solid", labels=[t.label for t in tiles], show_labels=False)
+
+
+def object_boxes(dmap: DuckietownMap) -> rr.Boxes3D:
+    """The map's objects as their collision boxes (length along their yaw)."""
+    objs = dmap.objects
+    return rr.Boxes3D(
+        centers=[(o.x, o.y, o.height / 2) for o in objs],
+        half_sizes=[(o.length / 2, o.width / 2, o.height / 2) for o in objs],
+        rotation_axis_angles=[rr.RotationAxisAngle(axis=(0, 0, 1), radians=o.yaw) for o in objs],
+        colors=[_OBJECT_RGB] * len(objs), fill_mode="solid", labels=[o.kind for o in objs])
+
+
+# ----- recording --------------------------------------------------------------------------
+@dataclass
+class _Clock:
+    """Accumulates the seconds spent inside ``with clock:`` blocks."""
+
+    seconds: float = 0.0
+    _start: float = field(default=0.0, repr=False)
+
+    def __enter__(self) -> _Clock:
+        self._start = time.perf_counter()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.seconds += time.perf_counter() - self._start
+
+
+@dataclass
+class _Step:
+    """The signals of sub-environment 0 after one control step."""
+
+    pose: tuple[float, float, float]
+    image: np.ndarray
+    action: np.ndarray
+    reward: float
+    cost_lane: float
+    cost_collision: float
+    lateral: float
+    heading_error: float
+
+
+class _ScalarColumns:
+    """Per-step scalars buffered and sent as columns (``send_columns``), which costs a tenth
+    of logging them one by one."""
+
+    def __init__(self, iteration: int | None) -> None:
+        self.iteration = iteration
+        self.times: dict[str, list[float]] = {"step": [], "sim_time": [], "episode": []}
+        self.values: dict[str, list[float]] = {}
+
+    def __len__(self) -> int:
+        return len(self.times["step"])
+
+    def add(self, step: int, sim_time: float, episode: int, values: dict[str, float]) -> None:
+        for name, value in (("step", step), ("sim_time", sim_time), ("episode", episode)):
+            self.times[name].append(value)
+        for path, value in values.items():
+            self.values.setdefault(path, []).append(float(value))
+
+    def send(self, rec: rr.RecordingStream) -> None:
+        """Send and clear the buffered rows."""
+        if not len(self):
+            return
+        indexes = [rr.TimeColumn("step", sequence=self.times["step"]),
+                   rr.TimeColumn("sim_time", duration=self.times["sim_time"]),
+                   rr.TimeColumn("episode", sequence=self.times["episode"])]
+        if self.iteration is not None:
+            indexes.append(rr.TimeColumn("iteration", sequence=[self.iteration] * len(self)))
+        for path, values in self.values.items():
+            rec.send_columns(path, indexes=indexes, columns=rr.Scalars.columns(scalars=values))
+        self.times = {name: [] for name in self.times}
+        self.values = {}
+
+
+class _Recorder:
+    """Logs one recording's map, steps and episode boundaries to a rerun stream."""
+
+    def __init__(self, rec: rr.RecordingStream, control_timestep: float, action_type: str,
+                 iteration: int | None, multipliers: dict[str, float] | None) -> None:
+        self.rec = rec
+        self.dt = control_timestep
+        self.action_paths = ACTION_ENTITY_PATHS[action_type]
+        self.iteration = iteration
+        self.multipliers = {LAGRANGE_PREFIX + name: float(value)
+                            for name, value in (multipliers or {}).items()}
+        self.steps = 0
+        self.episode = 0
+        self.trail: list[tuple[float, float, float]] = []
+        self.scalars = _ScalarColumns(iteration)
+        self.clock = _Clock()
+
+    def log_static(self, dmap: DuckietownMap, physics) -> None:
+        """The map, the robot's footprint and camera, and the series' names and colours."""
+        rec = self.rec
+        rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+        rec.log(TILES, tile_boxes(dmap), static=True)
+        rec.log(LANES, rr.LineStrips3D(lane_centre_strips(dmap), colors=_LANE_RGB, radii=0.004),
+                static=True)
+        rec.log(WHITE_MARKINGS, rr.LineStrips3D(white_marking_strips(dmap), colors=WHITE_RGB,
+                                                radii=_WHITE_WIDTH / 2), static=True)
+        rec.log(YELLOW_MARKINGS, rr.LineStrips3D(yellow_marking_strips(dmap), colors=YELLOW_RGB,
+                                                 radii=0.012), static=True)
+        rec.log(OBJECTS, object_boxes(dmap), static=True)
+        rec.log(TRAIL, rr.LineStrips3D.from_fields(colors=_TRAIL_RGB, radii=0.006), static=True)
+        self._log_robot_parts(physics)
+        self._log_series_styles()
+
+    def _log_robot_parts(self, physics) -> None:
+        """Footprint box and camera pose in the robot's frame, from the MuJoCo model."""
+        model = physics.named.model
+        self.rec.log(FOOTPRINT, rr.Boxes3D(centers=[model.geom_pos[C.FOOTPRINT_GEOM]],
+                                           half_sizes=[model.geom_size[C.FOOTPRINT_GEOM]],
+                                           colors=_ROBOT_RGB, fill_mode="solid"), static=True)
+        w, x, y, z = model.cam_quat[C.CAMERA]
+        self.rec.log(CAMERA, rr.Transform3D(translation=model.cam_pos[C.CAMERA],
+                                            quaternion=rr.Quaternion(xyzw=[x, y, z, w])),
+                     static=True)
+
+    def log_pinhole(self, height: int, width: int, fovy_degrees: float) -> None:
+        """The robot camera as a pinhole (MuJoCo cameras look along -z: right, up, back)."""
+        self.rec.log(CAMERA, rr.Pinhole(fov_y=math.radians(fovy_degrees),
+                                        aspect_ratio=width / height, resolution=[width, height],
+                                        camera_xyz=rr.ViewCoordinates.RUB,
+                                        image_plane_distance=_CAMERA_PLANE), static=True)
+
+    def _log_series_styles(self) -> None:
+        styles = {REWARD: ("progress (m)", (60, 180, 75)), COST_LANE: ("lane cost (dm)",
+                  (230, 25, 75)), COST_COLLISION: ("collision cost", (128, 0, 0)),
+                  LATERAL: ("lateral offset (m, + right)", (0, 130, 200)),
+                  HEADING_ERROR: ("heading error (rad)", (245, 130, 48))}
+        for path, (name, colour) in styles.items():
+            self.rec.log(path, rr.SeriesLines(names=name, colors=colour), static=True)
+        for path in self.multipliers:
+            self.rec.log(path, rr.SeriesLines(names="λ_" + path.split("/")[-1]), static=True)
+        for path in (*self.action_paths, *EPISODE_ENTITY_PATHS):
+            self.rec.log(path, rr.SeriesPoints(names=path.split("/")[-1], marker_sizes=2.0),
+                         static=True)
+
+    def _set_time(self) -> None:
+        self.rec.set_time("step", sequence=self.steps)
+        self.rec.set_time("sim_time", duration=self.steps * self.dt)
+        self.rec.set_time("episode", sequence=self.episode)
+        if self.iteration is not None:
+            self.rec.set_time("iteration", sequence=self.iteration)
+
+    def start_episode(self, pose: tuple[float, float, float]) -> None:
+        """An episode begins at ``pose`` (its spawn): clear the trail, log the event."""
+        self.trail = [(pose[0], pose[1], _LANE_HEIGHT)]
+        self._set_time()
+        x, y, yaw = pose
+        self.rec.log(EVENTS, rr.TextLog(f"episode {self.episode} starts at x {x:.3f} m, "
+                                        f"y {y:.3f} m, yaw {yaw:.3f} rad", level="INFO"))
+
+    def log_step(self, step: _Step) -> None:
+        """One control step: pose, trail and camera image now, the scalars in batches."""
+        rec = self.rec
+        self.steps += 1
+        self._set_time()
+        x, y, yaw = step.pose
+        self.trail.append((x, y, _LANE_HEIGHT))
+        rec.log(ROBOT, rr.Transform3D(translation=(x, y, C.WHEEL_RADIUS), quaternion=rr.Quaternion(
+            xyzw=[0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2)])))
+        rec.log(TRAIL, rr.LineStrips3D([self.trail]))
+        rec.log(IMAGE, rr.Image(step.image))
+        values = {REWARD: step.reward, COST_LANE: step.cost_lane,
+                  COST_COLLISION: step.cost_collision, LATERAL: step.lateral,
+                  HEADING_ERROR: step.heading_error,
+                  **dict(zip(self.action_paths, step.action.tolist(), strict=True)),
+                  **self.multipliers}
+        self.scalars.add(self.steps, self.steps * self.dt, self.episode, values)
+        if len(self.scalars) >= _SCALAR_BATCH:
+            self.scalars.send(rec)
+
+    def end_episode(self, stats: EpisodeStats, termination: str | None) -> None:
+        """An episode ended (at the last logged step): its reason and statistics."""
+        self.scalars.send(self.rec)
+        reason = termination or "time limit"
+        self.rec.log(EVENTS, rr.TextLog(
+            f"episode {self.episode} ends ({reason}) after {stats.length} steps: "
+            f"distance {stats.distance:.3f} m, mean lane cost {stats.lane_cost:.3f} dm, "
+            f"collisions {stats.collisions:g}", level="WARN" if termination else "INFO"))
+        for path, value in ((EPISODE_DISTANCE, stats.distance),
+                            (EPISODE_LANE_COST, stats.lane_cost),
+                            (EPISODE_COLLISIONS, stats.collisions),
+                            (EPISODE_LENGTH, stats.length)):
+            self.rec.log(path, rr.Scalars(float(value)))
+        self.episode += 1
+
+    def finish(self) -> None:
+        """Send what is buffered and write everything out."""
+        self.scalars.send(self.rec)
+        self.rec.flush()
+        self.rec.disconnect()
+
+
+def make_blueprint(action_type: str = "discrete", with_multipliers: bool = True) -> rrb.Blueprint:
+    """3D view and event log on the left; camera and time series on the right."""
+    series = [rrb.TimeSeriesView(origin="/", contents=["cost/**", "reward/**"],
+                                 name="costs and reward"),
+              rrb.TimeSeriesView(origin="lane_pose", name="lane pose"),
+              rrb.TimeSeriesView(origin="action", name=f"action ({action_type})")]
+    if with_multipliers:
+        series.append(rrb.TimeSeriesView(origin="lagrange", name="Lagrange multipliers"))
+    series.append(rrb.TimeSeriesView(origin="episode", name="episodes"))
+    return rrb.Blueprint(
+        rrb.Horizontal(
+            rrb.Vertical(rrb.Spatial3DView(origin="world", name="map"),
+                         rrb.TextLogView(origin=EVENTS, name="events"), row_shares=[4, 1]),
+            rrb.Vertical(rrb.Spatial2DView(origin=CAMERA, name="robot camera"),
+                         rrb.Vertical(*series), row_shares=[1, 3]),
+            column_shares=[3, 2]),
+        rrb.TimePanel(timeline="sim_time"), collapse_panels=True)
+
+
+# ----- sinks ------------------------------------------------------------------------------
+def check_writable(path: str | Path) -> Path:
+    """Create ``path``'s directory and an empty ``path``, so that a recording fails before
+    stepping, not halfway.
+
+    Raises:
+        RecordingError: naming the path when the directory or the file cannot be created.
+    """
+    path = Path(path)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with path.open("wb"):
+            pass
+    except OSError as err:
+        raise RecordingError(path, err.strerror or str(err)) from None
+    return path
+
+
+def _listening(port: int) -> bool:
+    """Whether something accepts TCP connections on ``VIEWER_HOST:port``."""
+    try:
+        with socket.create_connection((VIEWER_HOST, port), timeout=0.2):
+            return True
+    except OSError:
+        return False
+
+
+def _viewer_executable() -> str | None:
+    """The ``rerun`` viewer: on PATH, else beside the running Python (an unactivated venv)."""
+    found = shutil.which("rerun")
+    if found:
+        return found
+    beside = Path(sys.executable).parent / "rerun"
+    return str(beside) if beside.is_file() and os.access(beside, os.X_OK) else None
+
+
+def spawn_viewer(port: int = VIEWER_PORT) -> str:
+    """Start a native viewer listening on ``127.0.0.1:port`` (or reuse one already there) and
+    return its gRPC URL.
+
+    Raises:
+        RuntimeError: with the reason when no viewer runs (no executable, no display, ...).
+    """
+    url = f"rerun+http://{VIEWER_HOST}:{port}/proxy"
+    if _listening(port):
+        return url
+    executable = _viewer_executable()
+    if executable is None:
+        raise RuntimeError("no `rerun` executable on PATH")
+    with tempfile.TemporaryFile() as log:
+        process = subprocess.Popen(
+            [executable, "--port", str(port), "--bind", VIEWER_HOST, "--memory-limit", "25%"],
+            stdout=subprocess.DEVNULL, stderr=log, start_new_session=True,
+            env={**os.environ, "RERUN_APP_ONLY": "true"})
+        if _wait_listening(process, port) and _still_running(process, _SPAWN_GRACE):
+            return url
+        if process.poll() is None:
+            process.kill()
+        process.wait()
+        log.seek(0)
+        reason = _last_error_line(log.read().decode(errors="replace"))
+    raise RuntimeError(f"the viewer `{executable}` did not start: {reason}")
+
+
+def _wait_listening(process: subprocess.Popen, port: int) -> bool:
+    deadline = time.monotonic() + _SPAWN_TIMEOUT
+    while time.monotonic() < deadline and process.poll() is None:
+        if _listening(port):
+            return True
+        time.sleep(0.1)
+    return False
+
+
+def _still_running(process: subprocess.Popen, seconds: float) -> bool:
+    try:
+        process.wait(timeout=seconds)
+    except subprocess.TimeoutExpired:
+        return True
+    return False
+
+
+def _last_error_line(text: str) -> str:
+    """The most telling line of a viewer's log: its last error, colour codes removed."""
+    lines = [line.strip() for line in _ANSI.sub("", text).splitlines() if line.strip()]
+    errors = [line for line in lines if "error" in line.lower() or "panicked" in line]
+    return (errors or lines or ["it exited without a message"])[-1]
+
+
+def _open_sinks(path: Path | None, viewer: str, problems: list[str]
+                ) -> tuple[list, str | None]:
+    """The sinks for ``path`` and ``viewer``; an unreachable viewer becomes a warning."""
+    sinks: list = [rr.FileSink(path)] if path is not None else []
+    url = None
+    try:
+        if viewer == "spawn":
+            url = spawn_viewer(VIEWER_PORT)
+            sinks.append(rr.GrpcSink(url))
+        elif viewer == "serve":
+            server = rr.GrpcServerSink(VIEWER_HOST, VIEWER_PORT)
+            url = server.uri
+            sinks.append(server)
+    except Exception as err:  # any viewer failure must not stop the recording
+        problems.append(f"rerun viewer ({viewer}) unavailable, "
+                        f"{'writing only ' + str(path) if path else 'nothing recorded'}: {err}")
+        warnings.warn(problems[-1], RuntimeWarning, stacklevel=3)
+    return sinks, url
+
+
+# ----- playing ----------------------------------------------------------------------------
+def _camera_image(env, nxt: TensorDictBase, clock: _Clock) -> np.ndarray:
+    """Sub-environment 0's camera image: the observation, or rendered for state envs."""
+    if env.observation_type == "pixels":
+        return nxt["pixels"][0].numpy()
+    cam = env.config.camera
+    with clock:
+        return env.physics[0].render_camera(cam.height, cam.width, cam.supersample)
+
+
+def _read_step(env, nxt: TensorDictBase, action: np.ndarray, clock: _Clock) -> _Step:
+    outcome = env.tasks[0].outcome
+    return _Step(pose=env.physics[0].pose(), image=_camera_image(env, nxt, clock),
+                 action=np.atleast_1d(action).astype(np.float64),
+                 reward=float(nxt["reward"][0]), cost_lane=float(nxt["cost_lane"][0]),
+                 cost_collision=float(nxt["cost_collision"][0]),
+                 lateral=outcome.lane_pose.lateral,
+                 heading_error=outcome.lane_pose.heading_error)
+
+
+def _play(env, policy: Callable[[TensorDictBase], TensorDictBase], episodes: int,
+          recorder: _Recorder, render_clock: _Clock) -> list[EpisodeStats]:
+    """Step ``env`` until sub-environment 0 finished ``episodes`` episodes, logging it."""
+    accumulator = EpisodeAccumulator(1)
+    finished: list[EpisodeStats] = []
+    td = env.reset()
+    with recorder.clock:
+        recorder.start_episode(env.physics[0].pose())
+    while len(finished) < episodes:
+        td = policy(td)
+        action = td["action"][0].detach().cpu().numpy().copy()
+        stepped = env.step(td)
+        nxt = stepped["next"]
+        step = _read_step(env, nxt, action, render_clock)
+        with recorder.clock:
+            recorder.log_step(step)
+        ended = accumulator.add_step(*(nxt[key][:1].reshape(1).numpy() for key in
+                                       ("reward", "cost_lane", "cost_collision", "done",
+                                        "truncated")))
+        if ended:
+            with recorder.clock:
+                recorder.end_episode(ended[0], env.tasks[0].outcome.termination)
+            finished.append(ended[0])
+            if len(finished) == episodes:
+                break
+        td = env.maybe_reset(step_mdp(stepped))
+        if ended:
+            with recorder.clock:
+                recorder.start_episode(env.physics[0].pose())
+    return finished
+
+
+@torch.no_grad()
+def record_episodes(env, policy: Callable[[TensorDictBase], TensorDictBase], episodes: int,
+                    path: str | Path | None, *, deterministic: bool = True,
+                    viewer: str = "none", iteration: int | None = None,
+                    multipliers: dict[str, float] | None = None,
+                    recording_id: str | None = None,
+                    application_id: str = "crllk") -> RecordingReport:
+    """Play ``episodes`` episodes of sub-environment 0 of ``env`` from a fresh reset and record
+    them (the other sub-environments step along, unrecorded).
+
+    Args:
+        env: a :class:`crllk.envs.BatchedLaneKeepingEnv` (any batch size).
+        policy: writes ``"action"`` into the tensordict it is given.
+        episodes: episodes of sub-environment 0 to play and log.
+        path: the ``.rrd`` file to write (its directory is created); None: viewer only.
+        deterministic: take the policy's mode instead of sampling.
+        viewer: ``"none"`` (file only), ``"spawn"`` (start or reuse a native viewer on
+            127.0.0.1:``VIEWER_PORT``) or ``"serve"`` (a gRPC server on 127.0.0.1 for
+            ``rerun --connect``, alive while recording).
+        iteration: the training iteration, logged on the ``iteration`` timeline.
+        multipliers: Lagrange multipliers by constraint name (``{"lane": .., "collision":
+            ..}``), logged as ``lagrange/<name>`` every step.
+        recording_id: share one id between the files of a run to merge them in the viewer.
+        application_id: the rerun application (viewers keep one blueprint per application).
+
+    Raises:
+        RecordingError: before stepping, when ``path`` cannot be written.
+        ValueError: for a bad ``viewer`` or ``episodes``, or with neither path nor viewer.
+    """
+    if viewer not in VIEWERS:
+        raise ValueError(f"viewer must be one of {VIEWERS}, got {viewer!r}")
+    if episodes < 1:
+        raise ValueError(f"episodes must be at least 1, got {episodes}")
+    if path is None and viewer == "none":
+        raise ValueError("nothing to record to: give a path or a viewer")
+    file = check_writable(path) if path is not None else None
+    problems: list[str] = []
+    sinks, url = _open_sinks(file, viewer, problems)
+    if not sinks:
+        return RecordingReport(None, 0, 0, 0.0, warnings=tuple(problems))
+    rec = rr.RecordingStream(application_id, recording_id=recording_id)
+    recorder = _Recorder(rec, env.config.control_timestep, env.action_type, iteration,
+                         multipliers)
+    render_clock = _Clock()
+    exploration = ExplorationType.DETERMINISTIC if deterministic else ExplorationType.RANDOM
+    try:
+        with recorder.clock:
+            rec.set_sinks(*sinks, default_blueprint=make_blueprint(
+                env.action_type, with_multipliers=bool(multipliers)))
+            recorder.log_static(env.config.map, env.physics[0])
+            cam = env.config.camera
+            recorder.log_pinhole(cam.height, cam.width,
+                                 float(env.physics[0].named.model.cam_fovy[C.CAMERA]))
+        with set_exploration_type(exploration):
+            stats = _play(env, policy, episodes, recorder, render_clock)
+    finally:
+        with recorder.clock:
+            recorder.finish()
+    return RecordingReport(file, recorder.steps, len(stats), recorder.clock.seconds,
+                           render_clock.seconds, tuple(problems), tuple(stats), url)
+
+
+# ----- reading back -----------------------------------------------------------------------
+def read_recording(path: str | Path) -> dict[str, list[pa.RecordBatch]]:
+    """The record batches of the file's first recording, by entity path without the leading
+    ``/`` (``rerun.chunk.RrdReader``; static rows have no time columns)."""
+    chunks: dict[str, list[pa.RecordBatch]] = {}
+    for chunk in RrdReader(path).stream():
+        chunks.setdefault(chunk.entity_path.lstrip("/"), []).append(chunk.to_record_batch())
+    return chunks
+
+
+# ----- command line -----------------------------------------------------------------------
+class FollowerPolicy:
+    """The scripted lane follower (:class:`crllk.follower.LaneFollower`) as a policy for a
+    batched env with ``action="duty"``: writes every sub-environment's wheel duties."""
+
+    def __init__(self, env) -> None:
+        from crllk.follower import LaneFollower
+
+        self.env = env
+        self.follower = LaneFollower(env.config.map, env.config.motor)
+
+    def __call__(self, td: TensorDictBase) -> TensorDictBase:
+        duties = np.stack([self.follower.duty(physics) for physics in self.env.physics])
+        td.set("action", torch.as_tensor(duties, dtype=torch.float32))
+        return td
+
+
+@contextmanager
+def _closing(env) -> Iterator:
+    try:
+        yield env
+    finally:
+        env.close()
+
+
+def main(argv: Sequence[str] | None = None) -> None:
+    from crllk.envs import make_env
+
+    parser = argparse.ArgumentParser(
+        description="Record the scripted lane follower to a rerun .rrd file.")
+    parser.add_argument("--task", default="obstacle_loop")
+    parser.add_argument("--episodes", type=int, default=1)
+    parser.add_argument("--out", type=Path, default=Path("outputs/recordings/follower.rrd"))
+    parser.add_argument("--obs", choices=("state", "pixels"), default="pixels")
+    parser.add_argument("--horizon", type=int, default=None, help="steps per episode")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--viewer", choices=VIEWERS, default="none")
+    args = parser.parse_args(argv)
+    overrides = {"horizon": args.horizon} if args.horizon else None
+    env = make_env(args.task, observation=args.obs, action="duty", seed=args.seed,
+                   overrides=overrides)
+    with _closing(env):
+        try:
+            report = record_episodes(env, FollowerPolicy(env), args.episodes, args.out,
+                                     viewer=args.viewer)
+        except RecordingError as err:
+            sys.exit(f"error: {err}")
+    for stats in report.episode_stats:
+        print(f"episode: {stats.length} steps, {stats.distance:.2f} m, lane cost "
+              f"{stats.lane_cost:.3f} dm, collisions {stats.collisions:g}")
+    print(f"{report.steps} steps -> {report.path} ({report.logging_seconds:.2f} s in rerun, "
+          f"{1e3 * report.logging_seconds / max(report.steps, 1):.3f} ms/step)")
+
+
+__all__ = ["ACTION_ENTITY_PATHS", "ENTITY_PATHS", "VIEWERS", "FollowerPolicy", "RecordingError",
+           "RecordingReport", "check_writable", "make_blueprint", "read_recording",
+           "record_episodes", "spawn_viewer"]
+
+
+if __name__ == "__main__":
+    main()

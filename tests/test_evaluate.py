@@ -1,0 +1,143 @@
+"""Evaluation of runs: eval.json against a hand-stepped rollout of the same seeds, the command,
+aggregation across seeds and the lane follower's reference row."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from tiny_runs import run_in_process
+from torchrl.envs.utils import ExplorationType, set_exploration_type, step_mdp
+
+from crllk.envs import make_env
+from crllk.evaluate import aggregate, evaluate_follower, evaluate_run
+from crllk.runs import load_actor, read_eval_json
+
+REPO = Path(__file__).resolve().parents[1]
+EPISODES, NUM_ENVS, SEED = 5, 2, 7
+
+
+@pytest.fixture(scope="module")
+def tiny_run(tmp_path_factory) -> Path:
+    return run_in_process(tmp_path_factory.mktemp("evaluate") / "run", 2)
+
+
+@torch.no_grad()
+def hand_rollout(run_dir: Path, episodes: int, num_envs: int, seed: int) -> list[dict]:
+    """Steps the run's deterministic policy by hand; episode k is sub-environment k mod N's
+    (k // N)-th episode."""
+    env = make_env("small_loop", num_envs=num_envs, observation="state", action="discrete",
+                   seed=seed, overrides={"horizon": 12})
+    actor, _ = load_actor(run_dir, env)
+    sums = np.zeros((num_envs, 3))
+    steps = np.zeros(num_envs, dtype=int)
+    finished: list[list[dict]] = [[] for _ in range(num_envs)]
+    td = env.reset()
+    with set_exploration_type(ExplorationType.DETERMINISTIC):
+        while min(len(f) for f in finished) < -(-episodes // num_envs):
+            td = env.step(actor(td))
+            nxt = td["next"]
+            sums += torch.cat([nxt["reward"], nxt["cost_lane"], nxt["cost_collision"]],
+                              -1).numpy()
+            steps += 1
+            for i in np.flatnonzero(nxt["done"].reshape(-1).numpy()):
+                finished[i].append({"distance": sums[i, 0], "lane_cost": sums[i, 1] / steps[i],
+                                    "collisions": sums[i, 2], "length": int(steps[i])})
+                sums[i], steps[i] = 0.0, 0
+            td = env.maybe_reset(step_mdp(td))
+    env.close()
+    return [finished[k % num_envs][k // num_envs] for k in range(episodes)]
+
+
+def test_eval_json_matches_a_hand_rollout_of_the_same_seeds(tiny_run):
+    document = evaluate_run(tiny_run, episodes=EPISODES, num_envs=NUM_ENVS, seed=SEED)
+    assert read_eval_json(tiny_run) == json.loads(json.dumps(document))
+    assert document["evaluation"] == {"episodes": EPISODES, "seed": SEED,
+                                      "num_envs": NUM_ENVS, "deterministic": True}
+    assert document["source"]["frames"] == 32 and document["source"]["obs"] == "state"
+    rows = document["episodes"]
+    assert [r["episode"] for r in rows] == list(range(EPISODES))
+    expected = hand_rollout(tiny_run, EPISODES, NUM_ENVS, SEED)
+    for row, hand in zip(rows, expected, strict=True):
+        assert row["distance"] == pytest.approx(hand["distance"], abs=1e-5)
+        assert row["lane_cost"] == pytest.approx(hand["lane_cost"], abs=1e-5)
+        assert row["collisions"] == hand["collisions"]
+        assert row["length"] == hand["length"]
+        assert sum(row["actions"].values()) == row["length"]
+        assert row["termination"] in ("off_road", "collision", "unstable", "time_limit")
+    summary = document["summary"]
+    assert summary["J_R"] == pytest.approx(np.mean([h["distance"] for h in expected]))
+    assert summary["J_clane"] == pytest.approx(np.mean([h["lane_cost"] for h in expected]))
+    assert summary["J_coll"] == pytest.approx(np.mean([h["collisions"] for h in expected]))
+    histogram = document["action_histogram"]
+    assert sum(histogram.values()) == pytest.approx(1.0)
+    assert sum(document["terminations"].values()) == EPISODES
+    assert summary["satisfied"] == (summary["J_clane"] <= 0.5 and summary["J_coll"] <= 0.02)
+
+
+def test_stochastic_evaluation_is_seeded(tiny_run):
+    first = evaluate_run(tiny_run, episodes=2, num_envs=2, seed=3, deterministic=False)
+    second = evaluate_run(tiny_run, episodes=2, num_envs=2, seed=3, deterministic=False)
+    assert first["evaluation"]["deterministic"] is False
+    assert [r["length"] for r in first["episodes"]] == [r["length"] for r in second["episodes"]]
+
+
+def test_aggregate_is_mean_and_population_std_across_runs():
+    docs = [{"source": {"run_dir": name}, "summary": {"J_R": r, "J_clane": c, "J_coll": k,
+                                                      "episode_length": 512,
+                                                      "satisfied": c <= 0.5}}
+            for name, r, c, k in (("a", 2.0, 0.3, 0.0), ("b", 3.0, 0.7, 0.1))]
+    result = aggregate(docs)
+    assert result["J_R"] == {"mean": 2.5, "std": 0.5, "values": [2.0, 3.0]}
+    assert result["J_clane"]["mean"] == pytest.approx(0.5)
+    assert result["J_clane"]["std"] == pytest.approx(0.2)
+    assert result["J_coll"]["std"] == pytest.approx(0.05)
+    assert result["satisfied"] == [True, False] and result["runs"] == ["a", "b"]
+
+
+def test_the_lane_follower_is_a_reference_row():
+    document = evaluate_follower("small_loop", episodes=2, num_envs=2, seed=11)
+    assert document["source"]["algo"] == "follower"
+    assert document["summary"]["J_coll"] == 0.0
+    assert document["summary"]["J_clane"] < 0.5
+    assert document["summary"]["J_R"] > 3.0  # about one lap of 5.9 m in 17 s
+    assert set(document["action_histogram"]) >= {"left", "right", "bin_edges"}
+
+
+def test_evaluate_command_writes_eval_json_and_aggregates(tiny_run, tmp_path):
+    other = run_in_process(tmp_path / "other", 2, ["seed=1"])
+    out = tmp_path / "both.json"
+    result = subprocess.run(
+        [sys.executable, "-m", "crllk.evaluate", f"runs=[{tiny_run},{other}]", "episodes=2",
+         "num_envs=2", f"out={out}"], cwd=REPO, capture_output=True, text=True, timeout=300)
+    assert result.returncode == 0, result.stderr
+    assert "2 runs: J_R" in result.stdout
+    both = json.loads(out.read_text())
+    assert both["aggregate"]["runs"] == [str(tiny_run), str(other)]
+    assert (other / "eval.json").exists()
+
+
+@pytest.mark.parametrize(("args", "field"), [
+    (["run=/no/such/run"], "run"),
+    (["episodes=0", "follower=true"], "episodes"),
+    (["episodes=many", "follower=true"], "episodes"),
+    ([], "run"),
+])
+def test_bad_arguments_fail_clearly(args, field):
+    result = subprocess.run([sys.executable, "-m", "crllk.evaluate", *args], cwd=REPO,
+                            capture_output=True, text=True, timeout=120)
+    assert result.returncode == 2
+    assert result.stderr.startswith(f"error: evaluate: {field}:")
+    assert "Traceback" not in result.stderr
+
+
+def test_a_directory_without_a_run_fails_clearly(tmp_path):
+    result = subprocess.run([sys.executable, "-m", "crllk.evaluate", f"run={tmp_path}"],
+                            cwd=REPO, capture_output=True, text=True, timeout=120)
+    assert result.returncode == 2
+    assert "not a run directory" in result.stderr and "Traceback" not in result.stderr

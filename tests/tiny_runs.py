@@ -1,0 +1,28 @@
+"""Tiny training runs for tests: two sub-environments, eight steps per iteration."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from hydra import compose, initialize_config_module
+
+import crllk  # noqa: F401  (headless GL before torchrl)
+from crllk.train import resolve_config, train
+
+NUM_ENVS, ROLLOUT = 2, 8
+FRAMES_PER_ITERATION = NUM_ENVS * ROLLOUT
+TINY = [f"num_envs={NUM_ENVS}", f"rollout_steps={ROLLOUT}", "ppo.minibatch_size=8",
+        "ppo.epochs=2", "task.horizon=12", "progress=false", "checkpoint_every=1"]
+
+
+def compose_config(overrides: list[str]):
+    with initialize_config_module(config_module="crllk.conf", version_base="1.3"):
+        return compose(config_name="train", overrides=overrides)
+
+
+def run_in_process(run_dir: Path, iterations: int, extra: list[str] = (), *,
+                   frames_per_iteration: int = FRAMES_PER_ITERATION) -> Path:
+    """Trains ``iterations`` tiny iterations into ``run_dir`` and returns it."""
+    cfg = compose_config([*TINY, f"run_dir={run_dir}",
+                          f"total_frames={iterations * frames_per_iteration}", *extra])
+    return train(resolve_config(cfg))
