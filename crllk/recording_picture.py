@@ -31,6 +31,7 @@ _NS = 1e9
 """Nanoseconds per second (rerun stores durations in ns)."""
 _FIGURE_SIZE = (13.0, 6.5)
 """Picture size (inches at 100 dpi)."""
+_TRAIL_COLOURS = ("#29abff", "#f58231", "#911eb4", "#3cb44b", "#e6194b")
 
 
 @dataclass(frozen=True)
@@ -134,43 +135,58 @@ def _draw_strips(ax, batches: Sequence[pa.RecordBatch], width: float, **kwargs) 
 
 
 def draw_topdown(ax, chunks: dict[str, list[pa.RecordBatch]]) -> None:
-    """The logged map (tiles, markings, lane centres, objects) and the robot's trail."""
+    """The logged map (tiles, markings, lane centres, objects) and each episode's trail,
+    ending in a cross where the episode collided or left the road."""
     _draw_boxes(ax, chunks[R.TILES])
     _draw_strips(ax, chunks[R.WHITE_MARKINGS], 1.6)
     _draw_strips(ax, chunks[R.YELLOW_MARKINGS], 1.0)
     _draw_strips(ax, chunks[R.LANES], 0.5, alpha=0.5, linestyle=":")
     _draw_boxes(ax, chunks[R.OBJECTS], edge="black")
-    trail = np.asarray(positions(chunks).values)
-    ax.plot(trail[:, 0], trail[:, 1], color=(0.16, 0.67, 1.0), linewidth=2.2, label="trail")
-    ax.plot(*trail[0], "o", color="white", markeredgecolor="black", label="start")
-    ax.plot(*trail[-1], "s", color=(1.0, 0.84, 0.16), markeredgecolor="black", label="end")
+    trail = positions(chunks)
+    collisions = scalars(chunks, R.EPISODE_COLLISIONS)
+    crashed = {int(e) for e, c in zip(collisions.episodes, collisions.values, strict=True) if c}
+    points = np.asarray(trail.values)
+    for k, episode in enumerate(np.unique(trail.episodes)):
+        xy = points[trail.episodes == episode]
+        colour = _TRAIL_COLOURS[k % len(_TRAIL_COLOURS)]
+        ax.plot(xy[:, 0], xy[:, 1], color=colour, linewidth=2.2, label=f"episode {episode}")
+        ax.plot(*xy[0], "o", color="white", markeredgecolor=colour, markersize=6)
+        ax.plot(*xy[-1], "X" if episode in crashed else "s", color=colour,
+                markeredgecolor="black", markersize=10 if episode in crashed else 6)
     ax.set_aspect("equal")
     ax.autoscale_view()
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
+    ax.set_title("map and trails (o start, X collision or off road)", fontsize=10)
     ax.legend(loc="lower right", fontsize=8)
 
 
 def draw_series(ax, chunks: dict[str, list[pa.RecordBatch]]) -> None:
-    """Lane cost, collision cost and lateral offset over simulated time."""
+    """Lane cost, collision cost and lateral offset over simulated time, one segment per
+    episode."""
     for path, label, colour, scale in (
             (R.COST_LANE, "lane cost (dm)", "#e6194b", 1.0),
             (R.COST_COLLISION, "collision cost", "#800000", 1.0),
             (R.LATERAL, "lateral offset (dm, + right)", "#0082c8", 10.0)):
-        data = scalars(chunks, path, "sim_time")
-        ax.plot(data.steps / _NS, np.asarray(data.values) * scale, color=colour, label=label,
-                linewidth=1.2)
+        data = scalars(chunks, path)
+        values = np.asarray(data.values) * scale
+        for k, episode in enumerate(np.unique(data.episodes)):
+            rows = data.episodes == episode
+            ax.plot(data.times[rows], values[rows], color=colour, linewidth=1.2,
+                    label=label if k == 0 else None)
+            if k:
+                ax.axvline(data.times[rows][0], color="grey", linewidth=0.6, linestyle="--")
     ax.axhline(0.0, color="grey", linewidth=0.5)
-    ax.set_xlabel("simulated time (s)")
+    ax.set_xlabel("simulated time (s); dashed: episode starts")
     ax.legend(loc="upper right", fontsize=8)
 
 
 def draw_frames(axes: Sequence, frames: Series) -> None:
-    """Camera frames evenly spread over the recording (``frames`` on ``sim_time``)."""
+    """Camera frames evenly spread over the recording."""
     picks = np.linspace(0, len(frames.values) - 1, len(axes)).round().astype(int)
     for ax, k in zip(axes, picks, strict=True):
         ax.imshow(frames.values[k], interpolation="nearest")
-        ax.set_title(f"t = {frames.steps[k] / _NS:.1f} s", fontsize=9)
+        ax.set_title(f"episode {frames.episodes[k]}, t = {frames.times[k]:.1f} s", fontsize=8)
         ax.axis("off")
 
 
@@ -182,11 +198,10 @@ def draw_recording(path: str | Path, out: str | Path, title: str | None = None) 
                                 top=0.9, bottom=0.09, wspace=0.12)
     draw_topdown(figure.add_subplot(outer[0]), chunks)
     right = outer[1].subgridspec(2, _FRAMES, height_ratios=[1, 1.6], hspace=0.3, wspace=0.05)
-    draw_frames([figure.add_subplot(right[0, k]) for k in range(_FRAMES)],
-                images(chunks, "sim_time"))
+    draw_frames([figure.add_subplot(right[0, k]) for k in range(_FRAMES)], images(chunks))
     draw_series(figure.add_subplot(right[1, :]), chunks)
-    figure.suptitle(title or f"rerun recording {Path(path).name}: map, trail, robot camera "
-                    "(30×40) and costs, all read back from the .rrd")
+    figure.suptitle(title or f"{Path(path).name}: map, trails, robot camera (30×40) and costs, "
+                    "all read back from the rerun recording")
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
     figure.savefig(out)
