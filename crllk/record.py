@@ -126,7 +126,10 @@ _ANSI = re.compile(r"\x1b\[[0-9;]*m")
 _LANE_RGB = (230, 40, 200)
 _TRAIL_RGB = (40, 170, 255)
 _ROBOT_RGB = (250, 215, 40)
-_OBJECT_RGB = (255, 110, 20)
+_OBJECT_RGB = {"duckie": (250, 215, 40), "cone": (245, 105, 15), "barrier": (220, 30, 30),
+               "duckiebot": (40, 40, 45), "bus": (240, 190, 25), "truck": (50, 100, 200),
+               "tree": (50, 140, 50), "sign_blank": (235, 235, 235)}
+"""Box colour of each object kind (the main colour of its parts in the MuJoCo scene)."""
 
 
 class RecordingError(ValueError):
@@ -231,7 +234,8 @@ def object_boxes(dmap: DuckietownMap) -> rr.Boxes3D:
         centers=[(o.x, o.y, o.height / 2) for o in objs],
         half_sizes=[(o.length / 2, o.width / 2, o.height / 2) for o in objs],
         rotation_axis_angles=[rr.RotationAxisAngle(axis=(0, 0, 1), radians=o.yaw) for o in objs],
-        colors=[_OBJECT_RGB] * len(objs), fill_mode="solid", labels=[o.kind for o in objs])
+        colors=[_OBJECT_RGB.get(o.kind, (128, 128, 128)) for o in objs], fill_mode="solid",
+        labels=[o.kind for o in objs])
 
 
 # ----- recording --------------------------------------------------------------------------
@@ -485,10 +489,10 @@ def spawn_viewer(port: int = VIEWER_PORT) -> str:
         return url
     executable = _viewer_executable()
     if executable is None:
-        raise RuntimeError("no `rerun` executable on PATH")
+        raise RuntimeError(f"no `rerun` executable on PATH or in {Path(sys.executable).parent}")
     with tempfile.TemporaryFile() as log:
         process = subprocess.Popen(
-            [executable, "--port", str(port), "--bind", VIEWER_HOST, "--memory-limit", "25%"],
+            [executable, "--port", str(port), "--bind", VIEWER_HOST],
             stdout=subprocess.DEVNULL, stderr=log, start_new_session=True,
             env={**os.environ, "RERUN_APP_ONLY": "true"})
         if _wait_listening(process, port) and _still_running(process, _SPAWN_GRACE):
@@ -675,7 +679,7 @@ class FollowerPolicy:
     batched env with ``action="duty"``: writes every sub-environment's wheel duties."""
 
     def __init__(self, env) -> None:
-        from crllk.follower import LaneFollower
+        from crllk.follower import LaneFollower  # only the command line needs it
 
         self.env = env
         self.follower = LaneFollower(env.config.map, env.config.motor)
@@ -687,16 +691,41 @@ class FollowerPolicy:
 
 
 @contextmanager
-def _closing(env) -> Iterator:
+def _follower_env(args: argparse.Namespace) -> Iterator:
+    """A one-simulation env of the command line's task for the scripted follower."""
+    from crllk.envs import make_env
+
+    overrides = {"horizon": args.horizon} if args.horizon else None
+    env = make_env(args.task, observation=args.obs, action="duty", seed=args.seed,
+                   overrides=overrides)
     try:
         yield env
     finally:
         env.close()
 
 
-def main(argv: Sequence[str] | None = None) -> None:
-    from crllk.envs import make_env
+def _unrecorded_seconds(args: argparse.Namespace) -> float:
+    """Wall time of the same episodes played without recording (a fresh, equal env)."""
+    from crllk.evaluation import run_episodes
 
+    with _follower_env(args) as env:
+        start = time.perf_counter()
+        run_episodes(env, FollowerPolicy(env), args.episodes)
+        return time.perf_counter() - start
+
+
+def _print_report(report: RecordingReport, wall: float) -> None:
+    for stats in report.episode_stats:
+        print(f"episode: {stats.length} steps, {stats.distance:.2f} m, lane cost "
+              f"{stats.lane_cost:.3f} dm, collisions {stats.collisions:g}")
+    per_step = 1e3 / max(report.steps, 1)
+    print(f"{report.steps} steps -> {report.path}: {wall:.2f} s wall, "
+          f"{report.logging_seconds:.2f} s in rerun ({report.logging_seconds * per_step:.3f} "
+          f"ms/step), {report.render_seconds:.2f} s rendering the camera "
+          f"({report.render_seconds * per_step:.3f} ms/step)")
+
+
+def main(argv: Sequence[str] | None = None) -> None:
     parser = argparse.ArgumentParser(
         description="Record the scripted lane follower to a rerun .rrd file.")
     parser.add_argument("--task", default="obstacle_loop")
@@ -706,21 +735,20 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser.add_argument("--horizon", type=int, default=None, help="steps per episode")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--viewer", choices=VIEWERS, default="none")
+    parser.add_argument("--compare", action="store_true",
+                        help="also time the same episodes unrecorded")
     args = parser.parse_args(argv)
-    overrides = {"horizon": args.horizon} if args.horizon else None
-    env = make_env(args.task, observation=args.obs, action="duty", seed=args.seed,
-                   overrides=overrides)
-    with _closing(env):
+    with _follower_env(args) as env:
+        start = time.perf_counter()
         try:
             report = record_episodes(env, FollowerPolicy(env), args.episodes, args.out,
                                      viewer=args.viewer)
         except RecordingError as err:
             sys.exit(f"error: {err}")
-    for stats in report.episode_stats:
-        print(f"episode: {stats.length} steps, {stats.distance:.2f} m, lane cost "
-              f"{stats.lane_cost:.3f} dm, collisions {stats.collisions:g}")
-    print(f"{report.steps} steps -> {report.path} ({report.logging_seconds:.2f} s in rerun, "
-          f"{1e3 * report.logging_seconds / max(report.steps, 1):.3f} ms/step)")
+        wall = time.perf_counter() - start
+    _print_report(report, wall)
+    if args.compare:
+        print(f"unrecorded: {_unrecorded_seconds(args):.2f} s wall")
 
 
 __all__ = ["ACTION_ENTITY_PATHS", "ENTITY_PATHS", "VIEWERS", "FollowerPolicy", "RecordingError",

@@ -31,7 +31,7 @@ _NS = 1e9
 """Nanoseconds per second (rerun stores durations in ns)."""
 _FIGURE_SIZE = (13.0, 6.5)
 """Picture size (inches at 100 dpi)."""
-_TRAIL_COLOURS = ("#29abff", "#f58231", "#911eb4", "#3cb44b", "#e6194b")
+_TRAIL_COLOURS = ("#29abff", "#911eb4", "#3cb44b", "#f032e6", "#000075")
 
 
 @dataclass(frozen=True)

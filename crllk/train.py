@@ -18,6 +18,7 @@ continues exactly where the uninterrupted run would have been.
 from __future__ import annotations
 
 import csv
+import fcntl
 import io
 import math
 import sys
@@ -269,6 +270,7 @@ def train(config: TrainConfig) -> Path:
         for stale in ("metrics.csv", "eval.csv"):  # killed before its first checkpoint
             (run_dir / stale).unlink(missing_ok=True)
     env, learner, multipliers, generator = build_run(config)
+    lock = lock_run_dir(run_dir)
     episodes = EpisodeAccumulator(config.num_envs)
     metrics = CsvLog(run_dir / "metrics.csv", metric_columns(config.action.name))
     evaluations = CsvLog(run_dir / "eval.csv", EVAL_COLUMNS)
@@ -329,10 +331,29 @@ def train(config: TrainConfig) -> Path:
     env.close()
     if eval_env is not None:
         eval_env.close()
+    lock.close()
     print(f"done: {frames} frames in {iteration} iterations; run directory: {run_dir}",
           flush=True)
     print_last_evaluation(evaluations.path, config)
     return run_dir
+
+
+def lock_run_dir(run_dir: Path) -> io.TextIOWrapper:
+    """Holds ``run_dir/.lock`` exclusively until the returned file is closed (or the process
+    ends, even by a kill), so two processes never train one run.
+
+    Raises:
+        ConfigError: if another process holds the lock.
+    """
+    run_dir.mkdir(parents=True, exist_ok=True)
+    handle = (run_dir / ".lock").open("w")
+    try:
+        fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        handle.close()
+        raise ConfigError(SOURCE_RUN, "run_dir", f"{run_dir} is being trained by another "
+                          "process; wait for it to finish or choose another run_dir") from None
+    return handle
 
 
 def print_last_evaluation(path: Path, config: TrainConfig) -> None:

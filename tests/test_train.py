@@ -193,3 +193,25 @@ def test_broken_task_file_names_file_and_field(tmp_path):
     assert f"error: {broken}: tiles" in result.stderr and "stright" in result.stderr
     assert "Traceback" not in result.stderr
     assert not run_dir.exists()
+
+
+def test_a_run_being_trained_cannot_be_trained_twice(tmp_path):
+    """A second process on a locked run directory stops with a clear message, writes nothing,
+    and the lock goes with the process that held it."""
+    run_dir = tmp_path / "run"
+    holder = subprocess.Popen(
+        [sys.executable, "-c", "import sys; from pathlib import Path; "
+         "from crllk.train import lock_run_dir; held = lock_run_dir(Path(sys.argv[1])); "
+         "print('locked', flush=True); sys.stdin.read()", str(run_dir)],
+        cwd=REPO, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout.readline().strip() == "locked"
+        result = run_command(*TINY, f"run_dir={run_dir}", "resume=true", "total_frames=16")
+        assert result.returncode == 2
+        assert "is being trained by another process" in result.stderr
+        assert not (run_dir / "metrics.csv").exists()
+    finally:
+        holder.kill()
+        holder.wait()
+    result = run_command(*TINY, f"run_dir={run_dir}", "resume=true", "total_frames=16")
+    assert result.returncode == 0, result.stderr
