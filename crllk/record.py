@@ -36,6 +36,7 @@ from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pyarrow as pa
@@ -47,10 +48,12 @@ from tensordict import TensorDictBase
 from torchrl.envs.utils import ExplorationType, set_exploration_type, step_mdp
 
 from crllk.episodes import EpisodeAccumulator, EpisodeStats
+from crllk.follower import LaneFollower
 from crllk.maps import DuckietownMap, Lane
 from crllk.maps.lanes import LANE_OFFSET, OPPOSITE, RIGHT_OF
 from crllk.maps.road import openings
 from crllk.sim import constants as C
+from crllk.sim.physics import Physics
 from crllk.sim.texture import (
     _DASH_LENGTH,
     _GAP_LENGTH,
@@ -61,6 +64,13 @@ from crllk.sim.texture import (
     WHITE_RGB,
     YELLOW_RGB,
 )
+from crllk.task_config import CameraConfig
+
+if TYPE_CHECKING:
+    from crllk.envs import BatchedLaneKeepingEnv
+
+Policy = Callable[[TensorDictBase], TensorDictBase]
+"""Writes ``"action"`` into the tensordict it is given (a TensorDict module)."""
 
 # ----- entity paths -----------------------------------------------------------------------
 TILES = "world/map/tiles"
@@ -318,7 +328,7 @@ class _Recorder:
         self.scalars = _ScalarColumns(iteration)
         self.clock = _Clock()
 
-    def log_static(self, dmap: DuckietownMap, physics) -> None:
+    def log_static(self, dmap: DuckietownMap, physics: Physics, camera: CameraConfig) -> None:
         """The map, the robot's footprint and camera, and the series' names and colours."""
         rec = self.rec
         rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
@@ -332,9 +342,10 @@ class _Recorder:
         rec.log(OBJECTS, object_boxes(dmap), static=True)
         rec.log(TRAIL, rr.LineStrips3D.from_fields(colors=_TRAIL_RGB, radii=0.006), static=True)
         self._log_robot_parts(physics)
+        self._log_pinhole(camera, float(physics.named.model.cam_fovy[C.CAMERA]))
         self._log_series_styles()
 
-    def _log_robot_parts(self, physics) -> None:
+    def _log_robot_parts(self, physics: Physics) -> None:
         """Footprint box and camera pose in the robot's frame, from the MuJoCo model."""
         model = physics.named.model
         self.rec.log(FOOTPRINT, rr.Boxes3D(centers=[model.geom_pos[C.FOOTPRINT_GEOM]],
@@ -345,8 +356,9 @@ class _Recorder:
                                             quaternion=rr.Quaternion(xyzw=[x, y, z, w])),
                      static=True)
 
-    def log_pinhole(self, height: int, width: int, fovy_degrees: float) -> None:
+    def _log_pinhole(self, camera: CameraConfig, fovy_degrees: float) -> None:
         """The robot camera as a pinhole (MuJoCo cameras look along -z: right, up, back)."""
+        height, width = camera.height, camera.width
         self.rec.log(CAMERA, rr.Pinhole(fov_y=math.radians(fovy_degrees),
                                         aspect_ratio=width / height, resolution=[width, height],
                                         camera_xyz=rr.ViewCoordinates.RUB,
@@ -415,11 +427,17 @@ class _Recorder:
             self.rec.log(path, rr.Scalars(float(value)))
         self.episode += 1
 
-    def finish(self) -> None:
-        """Send what is buffered and write everything out."""
+    def finish(self) -> str | None:
+        """Send what is buffered and write everything out; returns the error of a flush that
+        failed (a live viewer that went away: the file sink is still completed)."""
         self.scalars.send(self.rec)
-        self.rec.flush()
+        problem = None
+        try:
+            self.rec.flush()
+        except RuntimeError as err:
+            problem = str(err)
         self.rec.disconnect()
+        return problem
 
 
 def make_blueprint(action_type: str = "discrete", with_multipliers: bool = True) -> rrb.Blueprint:
@@ -466,6 +484,12 @@ def _listening(port: int) -> bool:
             return True
     except OSError:
         return False
+
+
+def _check_port_free(port: int) -> None:
+    """Raise OSError when ``VIEWER_HOST:port`` cannot be bound (taken)."""
+    with socket.socket() as probe:
+        probe.bind((VIEWER_HOST, port))
 
 
 def _viewer_executable() -> str | None:
@@ -539,6 +563,7 @@ def _open_sinks(path: Path | None, viewer: str, problems: list[str]
             url = spawn_viewer(VIEWER_PORT)
             sinks.append(rr.GrpcSink(url))
         elif viewer == "serve":
+            _check_port_free(VIEWER_PORT)  # rerun's server would fail later, at the flush
             server = rr.GrpcServerSink(VIEWER_HOST, VIEWER_PORT)
             url = server.uri
             sinks.append(server)
@@ -550,7 +575,7 @@ def _open_sinks(path: Path | None, viewer: str, problems: list[str]
 
 
 # ----- playing ----------------------------------------------------------------------------
-def _camera_image(env, nxt: TensorDictBase, clock: _Clock) -> np.ndarray:
+def _camera_image(env: BatchedLaneKeepingEnv, nxt: TensorDictBase, clock: _Clock) -> np.ndarray:
     """Sub-environment 0's camera image: the observation, or rendered for state envs."""
     if env.observation_type == "pixels":
         return nxt["pixels"][0].numpy()
@@ -559,7 +584,8 @@ def _camera_image(env, nxt: TensorDictBase, clock: _Clock) -> np.ndarray:
         return env.physics[0].render_camera(cam.height, cam.width, cam.supersample)
 
 
-def _read_step(env, nxt: TensorDictBase, action: np.ndarray, clock: _Clock) -> _Step:
+def _read_step(env: BatchedLaneKeepingEnv, nxt: TensorDictBase, action: np.ndarray,
+               clock: _Clock) -> _Step:
     outcome = env.tasks[0].outcome
     return _Step(pose=env.physics[0].pose(), image=_camera_image(env, nxt, clock),
                  action=np.atleast_1d(action).astype(np.float64),
@@ -569,8 +595,8 @@ def _read_step(env, nxt: TensorDictBase, action: np.ndarray, clock: _Clock) -> _
                  heading_error=outcome.lane_pose.heading_error)
 
 
-def _play(env, policy: Callable[[TensorDictBase], TensorDictBase], episodes: int,
-          recorder: _Recorder, render_clock: _Clock) -> list[EpisodeStats]:
+def _play(env: BatchedLaneKeepingEnv, policy: Policy, episodes: int, recorder: _Recorder,
+          render_clock: _Clock) -> list[EpisodeStats]:
     """Step ``env`` until sub-environment 0 finished ``episodes`` episodes, logging it."""
     accumulator = EpisodeAccumulator(1)
     finished: list[EpisodeStats] = []
@@ -601,8 +627,7 @@ def _play(env, policy: Callable[[TensorDictBase], TensorDictBase], episodes: int
     return finished
 
 
-@torch.no_grad()
-def record_episodes(env, policy: Callable[[TensorDictBase], TensorDictBase], episodes: int,
+def record_episodes(env: BatchedLaneKeepingEnv, policy: Policy, episodes: int,
                     path: str | Path | None, *, deterministic: bool = True,
                     viewer: str = "none", iteration: int | None = None,
                     multipliers: dict[str, float] | None = None,
@@ -630,37 +655,48 @@ def record_episodes(env, policy: Callable[[TensorDictBase], TensorDictBase], epi
         RecordingError: before stepping, when ``path`` cannot be written.
         ValueError: for a bad ``viewer`` or ``episodes``, or with neither path nor viewer.
     """
+    _check_arguments(episodes, path, viewer)
+    file = check_writable(path) if path is not None else None
+    problems: list[str] = []
+    sinks, url = _open_sinks(file, viewer, problems)
+    if not sinks:
+        return RecordingReport(None, 0, 0, 0.0, warnings=tuple(problems))
+    recorder = _Recorder(rr.RecordingStream(application_id, recording_id=recording_id),
+                         env.config.control_timestep, env.action_type, iteration, multipliers)
+    render_clock = _Clock()
+    exploration = ExplorationType.DETERMINISTIC if deterministic else ExplorationType.RANDOM
+    try:
+        with recorder.clock:
+            recorder.rec.set_sinks(*sinks, default_blueprint=make_blueprint(
+                env.action_type, with_multipliers=bool(multipliers)))
+            recorder.log_static(env.config.map, env.physics[0], env.config.camera)
+        with torch.no_grad(), set_exploration_type(exploration):
+            stats = _play(env, policy, episodes, recorder, render_clock)
+    finally:
+        with recorder.clock:
+            problem = recorder.finish()
+    if problem:
+        _flush_failed(problem, file, viewer, problems)
+    return RecordingReport(file, recorder.steps, len(stats), recorder.clock.seconds,
+                           render_clock.seconds, tuple(problems), tuple(stats), url)
+
+
+def _check_arguments(episodes: int, path: str | Path | None, viewer: str) -> None:
     if viewer not in VIEWERS:
         raise ValueError(f"viewer must be one of {VIEWERS}, got {viewer!r}")
     if episodes < 1:
         raise ValueError(f"episodes must be at least 1, got {episodes}")
     if path is None and viewer == "none":
         raise ValueError("nothing to record to: give a path or a viewer")
-    file = check_writable(path) if path is not None else None
-    problems: list[str] = []
-    sinks, url = _open_sinks(file, viewer, problems)
-    if not sinks:
-        return RecordingReport(None, 0, 0, 0.0, warnings=tuple(problems))
-    rec = rr.RecordingStream(application_id, recording_id=recording_id)
-    recorder = _Recorder(rec, env.config.control_timestep, env.action_type, iteration,
-                         multipliers)
-    render_clock = _Clock()
-    exploration = ExplorationType.DETERMINISTIC if deterministic else ExplorationType.RANDOM
-    try:
-        with recorder.clock:
-            rec.set_sinks(*sinks, default_blueprint=make_blueprint(
-                env.action_type, with_multipliers=bool(multipliers)))
-            recorder.log_static(env.config.map, env.physics[0])
-            cam = env.config.camera
-            recorder.log_pinhole(cam.height, cam.width,
-                                 float(env.physics[0].named.model.cam_fovy[C.CAMERA]))
-        with set_exploration_type(exploration):
-            stats = _play(env, policy, episodes, recorder, render_clock)
-    finally:
-        with recorder.clock:
-            recorder.finish()
-    return RecordingReport(file, recorder.steps, len(stats), recorder.clock.seconds,
-                           render_clock.seconds, tuple(problems), tuple(stats), url)
+
+
+def _flush_failed(problem: str, file: Path | None, viewer: str, problems: list[str]) -> None:
+    """A failed final flush: the file's error without a viewer, else a lost viewer."""
+    if viewer == "none" and file is not None:
+        raise RecordingError(file, problem)
+    problems.append(f"rerun viewer ({viewer}) lost while recording"
+                    f"{', the file is complete' if file else ''}: {problem}")
+    warnings.warn(problems[-1], RuntimeWarning, stacklevel=3)
 
 
 # ----- reading back -----------------------------------------------------------------------
@@ -678,9 +714,7 @@ class FollowerPolicy:
     """The scripted lane follower (:class:`crllk.follower.LaneFollower`) as a policy for a
     batched env with ``action="duty"``: writes every sub-environment's wheel duties."""
 
-    def __init__(self, env) -> None:
-        from crllk.follower import LaneFollower  # only the command line needs it
-
+    def __init__(self, env: BatchedLaneKeepingEnv) -> None:
         self.env = env
         self.follower = LaneFollower(env.config.map, env.config.motor)
 

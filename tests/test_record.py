@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
+from rerun.chunk import RrdReader
 from torchrl.envs.utils import step_mdp
 
 import crllk
@@ -88,6 +89,9 @@ def test_recording_holds_every_entity_and_one_pose_per_step(recorded):
     iterations = {v for b in chunks["world/robot"] for v in b.column("iteration").to_pylist()}
     assert iterations == {7}
     assert scalars(chunks, "lagrange/collision").values == [2.5] * report.steps
+    reader = RrdReader(report.path)
+    assert [r.recording_id for r in reader.recordings()] == ["run-0"]  # merges across files
+    assert reader.blueprints()  # the layout travels with the file
 
 
 def test_recording_logs_episode_boundaries_and_statistics(recorded):

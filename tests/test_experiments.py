@@ -1,0 +1,61 @@
+"""``python -m crllk.experiments`` at a tiny budget: every run trained, evaluated, the tables and
+figures written from their JSON; a second invocation reuses the finished runs."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+from conftest import TINY_EXPERIMENT
+
+from crllk.experiments import AGENTS, PAPER_TABLE1, table_markdown
+from crllk.runs import read_eval_json
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def test_table1_lists_every_agent_beside_the_paper(tiny_experiments):
+    runs, results, _ = tiny_experiments
+    document = json.loads((results / "table1.json").read_text())
+    assert list(document["agents"]) == list(AGENTS)
+    assert document["paper"]["CRLLK-D"]["J_clane"] == list(PAPER_TABLE1["CRLLK-D"]["J_clane"])
+    for agent, entry in document["agents"].items():
+        run = runs / "small_loop" / f"{agent}-a0.5-seed0"
+        summary = read_eval_json(run)["summary"]
+        assert entry["J_clane"]["values"] == [summary["J_clane"]]
+        assert entry["frames"] == [16]
+    markdown = (results / "table1.md").read_text()
+    assert markdown == table_markdown(document)
+    assert "Budget: 16 environment frames per run" in markdown
+    assert "Observation: `state`" in markdown and "python -m crllk.experiments all" in markdown
+    assert "| J_clane (paper) | 0.66 ± 0.02 | 0.99 ± 0.07 | 0.31 ± 0.00 | 1.04 ± 0.25 | |" \
+        in markdown
+    assert "CRLLK-D misses" in markdown or "CRLLK-D satisfies" in markdown
+
+
+def test_map_tables_and_figure1_are_written(tiny_experiments):
+    runs, results, _ = tiny_experiments
+    for task in ("zigzag", "obstacle_loop"):
+        document = json.loads((results / f"table_{task}.json").read_text())
+        assert list(document["agents"]) == ["CRLLK-D", "PPO-D"] and document["task"] == task
+    figure = json.loads((results / "figure1.json").read_text())
+    assert list(figure["thresholds"]) == ["0.5", "0.75"]
+    for entry in figure["thresholds"].values():
+        assert entry["curves"]["lambda_lane"]["frames"] == [16.0]  # one 16-frame iteration
+        assert sum(entry["test_episode"]["actions"].values()) > 0
+    for name in ("figure1_curves.png", "figure1_actions.png"):
+        assert (results / name).read_bytes()[:4] == b"\x89PNG"
+    assert (runs / "small_loop" / "CRLLK-D-a0.75-seed0" / "eval.json").exists()
+
+
+def test_a_second_invocation_reuses_finished_runs(tiny_experiments):
+    runs, results, _ = tiny_experiments
+    completed = subprocess.run(
+        [sys.executable, "-m", "crllk.experiments", "table1", *TINY_EXPERIMENT, "--runs-root",
+         str(runs.parent), "--results", str(results)], cwd=REPO, capture_output=True,
+        text=True, timeout=300)
+    assert completed.returncode == 0, completed.stderr
+    assert "training 0 of 4 runs" in completed.stdout
+    assert "evaluating 0 of 4 runs" in completed.stdout
