@@ -6,6 +6,7 @@ Used by ``python -m crllk.experiments figure1`` and by the notebooks.
 from __future__ import annotations
 
 import json
+import warnings
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -16,6 +17,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 import torch
+from matplotlib.ticker import FuncFormatter
 from torchrl.envs.utils import ExplorationType, set_exploration_type, step_mdp
 
 from crllk.actions import DISCRETE_NAMES
@@ -27,6 +29,10 @@ SMOOTHING_ITERATIONS = 10
 """Window (iterations) of the moving average over training curves."""
 CURVES = (("lambda_lane", "λ_lane"), ("J_clane", "J_clane (dm)"), ("J_R", "J_R (m per episode)"))
 """Figure 1's panels: metrics.csv column and axis label."""
+
+
+THOUSANDS = FuncFormatter(lambda value, _: f"{value / 1000:g}k")
+"""Axis labels in thousands (frames)."""
 
 
 def moving_average(values: np.ndarray, window: int = SMOOTHING_ITERATIONS) -> np.ndarray:
@@ -50,7 +56,9 @@ def seed_band(run_dirs: Sequence[Path], column: str,
     frames = curves[0]["frames"][:length]
     values = np.stack([moving_average(c[column][:length]) if smooth else c[column][:length]
                        for c in curves])
-    return frames, np.nanmean(values, 0), np.nanmin(values, 0), np.nanmax(values, 0)
+    with warnings.catch_warnings():  # iterations before any episode finished are NaN
+        warnings.simplefilter("ignore", RuntimeWarning)
+        return frames, np.nanmean(values, 0), np.nanmin(values, 0), np.nanmax(values, 0)
 
 
 def plot_action_distribution(ax: Any, histograms: Mapping[str, Mapping[str, float]]) -> None:
@@ -144,6 +152,7 @@ def draw_figure1_curves(data: Mapping[str, Any]) -> Any:
             ax.fill_between(curve["frames"], curve["min"], curve["max"], color=colors[k],
                             alpha=0.2, linewidth=0)
             ax.set_xlabel("environment frames")
+            ax.xaxis.set_major_formatter(THOUSANDS)
             ax.set_ylabel(title)
             if column == "J_clane":
                 ax.axhline(float(threshold), color=colors[k], linestyle="--", linewidth=1)

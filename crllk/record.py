@@ -17,6 +17,14 @@ and ``lagrange/<name>`` per multiplier): the map under ``world/map`` (static), t
 image), the trail of the current episode ``world/trail``, per-step scalars ``reward/...``,
 ``cost/...``, ``lane_pose/...``, ``action/...``, ``lagrange/...``, per-episode scalars
 ``episode/...`` and the text events ``events`` (episode starts, ends and their reasons).
+Per-step scalars are sent in columns every 30 steps and at each episode's end.
+
+Viewers listen on 127.0.0.1 only. ``viewer="spawn"`` reuses a viewer already answering on
+``127.0.0.1:VIEWER_PORT`` (start one with ``rerun --bind 127.0.0.1`` to watch a training run
+across recordings) or starts ``rerun --bind 127.0.0.1``; ``viewer="serve"`` hosts a gRPC server
+for ``rerun --connect`` while the recording runs. A viewer that cannot be reached, or that goes
+away, is a warning: the file is written all the same. A path that cannot be written raises
+:class:`RecordingError` before the first step.
 """
 
 from __future__ import annotations
@@ -116,6 +124,12 @@ VIEWER_PORT = 9876
 """gRPC port of a spawned or served viewer."""
 _SPAWN_TIMEOUT = 15.0
 """How long a spawned viewer may take to listen (s)."""
+_PROBE_TIMEOUT = 1.0
+"""How long a listener on the viewer port may take to answer an HTTP/2 preface (s)."""
+_HTTP2_PREFACE = b"PRI * HTTP/2.0\r\n\r\nSM\r\n\r\n" + bytes([0, 0, 0, 4, 0, 0, 0, 0, 0])
+"""The HTTP/2 client preface and an empty SETTINGS frame; gRPC servers answer with theirs."""
+_HTTP2_SETTINGS = 4
+"""Frame type of an HTTP/2 SETTINGS frame (byte 3 of the frame header)."""
 _SPAWN_GRACE = 1.0
 """A spawned viewer must still run this long after it listens (s); one without a display
 listens first and exits right after."""
@@ -456,7 +470,8 @@ def make_blueprint(action_type: str = "discrete", with_multipliers: bool = True)
             rrb.Vertical(rrb.Spatial2DView(origin=CAMERA, name="robot camera"),
                          rrb.Vertical(*series), row_shares=[1, 3]),
             column_shares=[3, 2]),
-        rrb.TimePanel(timeline="sim_time"), collapse_panels=True)
+        rrb.BlueprintPanel(state="collapsed"), rrb.SelectionPanel(state="collapsed"),
+        rrb.TimePanel(timeline="sim_time", state="expanded"))
 
 
 # ----- sinks ------------------------------------------------------------------------------
@@ -477,13 +492,19 @@ def check_writable(path: str | Path) -> Path:
     return path
 
 
-def _listening(port: int) -> bool:
-    """Whether something accepts TCP connections on ``VIEWER_HOST:port``."""
+def _port_state(port: int) -> str:
+    """``"free"``, ``"grpc"`` (an HTTP/2 server, such as a rerun viewer, answers on
+    ``VIEWER_HOST:port``) or ``"other"`` (something listens and does not answer: a rerun
+    stream connected to it would hang when closed)."""
     try:
-        with socket.create_connection((VIEWER_HOST, port), timeout=0.2):
-            return True
+        with socket.create_connection((VIEWER_HOST, port), timeout=_PROBE_TIMEOUT) as probe:
+            probe.sendall(_HTTP2_PREFACE)
+            frame = probe.recv(9)
+    except ConnectionRefusedError:
+        return "free"
     except OSError:
-        return False
+        return "other"
+    return "grpc" if len(frame) == 9 and frame[3] == _HTTP2_SETTINGS else "other"
 
 
 def _check_port_free(port: int) -> None:
@@ -509,8 +530,11 @@ def spawn_viewer(port: int = VIEWER_PORT) -> str:
         RuntimeError: with the reason when no viewer runs (no executable, no display, ...).
     """
     url = f"rerun+http://{VIEWER_HOST}:{port}/proxy"
-    if _listening(port):
+    state = _port_state(port)
+    if state == "grpc":
         return url
+    if state == "other":
+        raise RuntimeError(f"{VIEWER_HOST}:{port} is taken by something that is not a viewer")
     executable = _viewer_executable()
     if executable is None:
         raise RuntimeError(f"no `rerun` executable on PATH or in {Path(sys.executable).parent}")
@@ -532,7 +556,7 @@ def spawn_viewer(port: int = VIEWER_PORT) -> str:
 def _wait_listening(process: subprocess.Popen, port: int) -> bool:
     deadline = time.monotonic() + _SPAWN_TIMEOUT
     while time.monotonic() < deadline and process.poll() is None:
-        if _listening(port):
+        if _port_state(port) == "grpc":
             return True
         time.sleep(0.1)
     return False
