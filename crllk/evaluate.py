@@ -3,13 +3,15 @@
     python -m crllk.evaluate run=runs/small_loop/crllk-discrete-state-seed0 episodes=100
     python -m crllk.evaluate 'runs=[runs/a,runs/b]' episodes=100 out=results/ab.json
     python -m crllk.evaluate follower=true task=small_loop episodes=100
+    python -m crllk.evaluate run=... episodes=100 record=true record_episodes=2 [viewer=spawn]
 
 Each run's checkpoint plays ``episodes`` seeded episodes (episode k in sub-environment
 k mod ``num_envs``, spawns from ``seed``, by default the run's evaluation seed, never a
 training seed) with its deterministic policy (``deterministic=false`` samples). The result goes
 to ``<run>/eval.json``: J_R (m), J_clane (dm), J_coll, episode length, the action histogram,
 termination reasons and one row per episode. Several runs also print (and with ``out=`` write)
-mean ± std across runs, the paper's way of reporting seeds.
+mean ± std across runs, the paper's way of reporting seeds. ``record=true`` also records
+``record_episodes`` episodes of each run with rerun to ``<run>/recordings/eval.rrd``.
 """
 
 from __future__ import annotations
@@ -26,14 +28,13 @@ import numpy as np
 import torch
 from omegaconf import OmegaConf
 from omegaconf.errors import OmegaConfBaseException
-from tensordict import TensorDictBase
 
 from crllk.actions import DISCRETE_NAMES
 from crllk.checkpoint import atomic_write_text
-from crllk.envs import BatchedLaneKeepingEnv, make_env
+from crllk.envs import make_env
 from crllk.errors import ConfigError
 from crllk.evaluation import EvaluationResult, run_episodes
-from crllk.follower import LaneFollower
+from crllk.follower import FollowerPolicy
 from crllk.runs import EVAL_FILE, load_actor, load_run_config
 
 SOURCE = "evaluate"
@@ -58,6 +59,9 @@ class EvaluateConfig:
     num_envs: int = 10
     threads: int = 1
     out: str | None = None
+    record: bool = False
+    record_episodes: int = 1
+    viewer: str = "none"
     lane_threshold: float = 0.5
     collision_threshold: float = 0.02
 
@@ -135,19 +139,6 @@ def evaluate_run(run_dir: str | Path, *, episodes: int, deterministic: bool = Tr
     return document
 
 
-class FollowerPolicy:
-    """The scripted lane follower as a batched policy: wheel duties from each sub-env's true
-    pose (privileged; a reference, not a learner)."""
-
-    def __init__(self, env: BatchedLaneKeepingEnv):
-        self.env = env
-        self.followers = [LaneFollower(task.map, env.config.motor) for task in env.tasks]
-
-    def __call__(self, td: TensorDictBase) -> TensorDictBase:
-        duties = [f.duty(p) for f, p in zip(self.followers, self.env.physics, strict=True)]
-        return td.set("action", torch.as_tensor(np.array(duties), dtype=torch.float32))
-
-
 def evaluate_follower(task: str | Path, *, episodes: int, seed: int = DEFAULT_SEED,
                       num_envs: int = 10, thresholds: dict[str, float] | None = None,
                       ) -> dict[str, Any]:
@@ -162,6 +153,34 @@ def evaluate_follower(task: str | Path, *, episodes: int, seed: int = DEFAULT_SE
         settings={"episodes": episodes, "seed": seed, "num_envs": num_envs,
                   "deterministic": True},
         source={"task": str(task), "algo": "follower", "action": "duty", "obs": "state"})
+
+
+def record_run(run_dir: str | Path, *, episodes: int, seed: int | None = None,
+               deterministic: bool = True, viewer: str = "none") -> Path:
+    """Records ``episodes`` evaluation episodes of the run's policy (from the same spawn seed as
+    :func:`evaluate_run`) to ``<run_dir>/recordings/eval.rrd``; returns the path.
+
+    Raises:
+        crllk.record.RecordingError: if the file cannot be written.
+    """
+    from crllk.record import record_episodes  # rerun is imported only when recording
+
+    config = load_run_config(run_dir)
+    env = make_env(config.task_source(), num_envs=1, observation=config.obs.name,
+                   action=config.action.name, overrides=config.task_overrides(),
+                   seed=config.eval.seed if seed is None else seed)
+    path = Path(run_dir) / "recordings" / "eval.rrd"
+    try:
+        actor, info = load_actor(run_dir, env)
+        report = record_episodes(env, actor, episodes, path, deterministic=deterministic,
+                                 viewer=viewer, multipliers=info["multipliers"],
+                                 recording_id=f"crllk-eval-{Path(run_dir).resolve()}")
+    finally:
+        env.close()
+    for message in report.warnings:
+        print(f"warning: {message}", file=sys.stderr, flush=True)
+    print(f"recording: {path} ({report.episodes} episodes, {report.steps} steps)", flush=True)
+    return path
 
 
 # ----- several runs ------------------------------------------------------------------------
@@ -204,7 +223,10 @@ def parse(argv: Sequence[str]) -> EvaluateConfig:
     except OmegaConfBaseException as err:
         key = getattr(err, "full_key", None) or "<arguments>"
         raise ConfigError(SOURCE, str(key), str(err).splitlines()[0]) from None
-    for key in ("episodes", "num_envs", "threads"):
+    if config.viewer not in ("none", "spawn", "serve"):
+        raise ConfigError(SOURCE, "viewer", f"must be one of none, spawn, serve, got "
+                          f"{config.viewer!r}")
+    for key in ("episodes", "num_envs", "threads", "record_episodes"):
         if getattr(config, key) < 1:
             raise ConfigError(SOURCE, key, f"must be >= 1, got {getattr(config, key)}")
     if not config.run_dirs() and not config.follower:
@@ -225,6 +247,9 @@ def main(argv: Sequence[str] | None = None) -> int:
                                           deterministic=config.deterministic,
                                           seed=config.seed, num_envs=config.num_envs))
             print(format_summary(documents[-1]), flush=True)
+            if config.record:
+                record_run(run_dir, episodes=config.record_episodes, seed=config.seed,
+                           deterministic=config.deterministic, viewer=config.viewer)
         output: dict[str, Any] = {}
         if len(documents) > 1:
             output["aggregate"] = aggregate(documents)
@@ -241,6 +266,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             Path(config.out).parent.mkdir(parents=True, exist_ok=True)
             atomic_write_text(config.out, json.dumps(output, indent=1) + "\n")
     except ConfigError as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    except ValueError as err:  # crllk.record.RecordingError: the recording cannot be written
         print(f"error: {err}", file=sys.stderr)
         return 2
     return 0

@@ -7,14 +7,18 @@ and commands a yaw rate from curvature feed-forward plus heading and lateral fee
     w = v * kappa - k_heading * e_heading + k_lateral * v * e_lateral
 
 then turns (v, w) into wheel duty cycles through the DB18 steady-state gains.
+:class:`FollowerPolicy` drives every simulation of a batched env (``action="duty"``) with it.
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
+import torch
+from tensordict import TensorDictBase
 
 from crllk.maps import DuckietownMap
 from crllk.sim.physics import Physics
@@ -76,3 +80,17 @@ def _predict(x: float, y: float, yaw: float, speed: float, yaw_rate: float,
     radius = speed / yaw_rate
     return (x + radius * (math.sin(new_yaw) - math.sin(yaw)),
             y - radius * (math.cos(new_yaw) - math.cos(yaw)), new_yaw)
+
+
+class FollowerPolicy:
+    """The scripted lane follower (:class:`crllk.follower.LaneFollower`) as a policy for a
+    batched env with ``action="duty"``: writes every sub-environment's wheel duties."""
+
+    def __init__(self, env: Any) -> None:
+        self.env = env
+        self.follower = LaneFollower(env.config.map, env.config.motor)
+
+    def __call__(self, td: TensorDictBase) -> TensorDictBase:
+        duties = np.stack([self.follower.duty(physics) for physics in self.env.physics])
+        td.set("action", torch.as_tensor(duties, dtype=torch.float32))
+        return td

@@ -56,7 +56,7 @@ from tensordict import TensorDictBase
 from torchrl.envs.utils import ExplorationType, set_exploration_type, step_mdp
 
 from crllk.episodes import EpisodeAccumulator, EpisodeStats
-from crllk.follower import LaneFollower
+from crllk.follower import FollowerPolicy
 from crllk.maps import DuckietownMap, Lane
 from crllk.maps.lanes import LANE_OFFSET, OPPOSITE, RIGHT_OF
 from crllk.maps.road import openings
@@ -734,20 +734,6 @@ def read_recording(path: str | Path) -> dict[str, list[pa.RecordBatch]]:
 
 
 # ----- command line -----------------------------------------------------------------------
-class FollowerPolicy:
-    """The scripted lane follower (:class:`crllk.follower.LaneFollower`) as a policy for a
-    batched env with ``action="duty"``: writes every sub-environment's wheel duties."""
-
-    def __init__(self, env: BatchedLaneKeepingEnv) -> None:
-        self.env = env
-        self.follower = LaneFollower(env.config.map, env.config.motor)
-
-    def __call__(self, td: TensorDictBase) -> TensorDictBase:
-        duties = np.stack([self.follower.duty(physics) for physics in self.env.physics])
-        td.set("action", torch.as_tensor(duties, dtype=torch.float32))
-        return td
-
-
 @contextmanager
 def _follower_env(args: argparse.Namespace) -> Iterator:
     """A one-simulation env of the command line's task for the scripted follower."""

@@ -53,7 +53,8 @@ from crllk.train_config import TrainConfig, validate
 COSTS = ("lane", "collision")
 """Constraint names; cost ``c`` is read from ``("next", "cost_<c>")``."""
 DISCRETE_ACTION_NAMES = ("left", "right", "straight")
-RESUME_KEEPS = ("total_frames", "progress", "threads", "checkpoint_every")
+RESUME_KEEPS = ("total_frames", "progress", "threads", "checkpoint_every", "record_every",
+                "viewer")
 """Settings a resumed run takes from the command line; all others come from its config.yaml."""
 SOURCE_RUN = "run"
 """How errors about the run directory name their source."""
@@ -274,7 +275,7 @@ def train(config: TrainConfig) -> Path:
     episodes = EpisodeAccumulator(config.num_envs)
     metrics = CsvLog(run_dir / "metrics.csv", metric_columns(config.action.name))
     evaluations = CsvLog(run_dir / "eval.csv", EVAL_COLUMNS)
-    eval_env = None
+    eval_env = record_env = None
     iteration, frames, elapsed = 0, 0, 0.0
 
     if resuming:
@@ -323,14 +324,19 @@ def train(config: TrainConfig) -> Path:
                 eval_env = build_env(config, num_envs=config.eval.num_envs, seed=config.eval.seed)
             evaluations.append(evaluate(config, eval_env, learner, iteration, frames,
                                         time.perf_counter() - started))
+        if config.record_every and iteration % config.record_every == 0:
+            if record_env is None:
+                record_env = build_env(config, num_envs=1, seed=config.eval.seed)
+            record_iteration(config, record_env, learner, multipliers, iteration)
         if iteration % config.checkpoint_every == 0 or frames >= config.total_frames:
             save_checkpoint(checkpoint_path, checkpoint_state(
                 config, learner, multipliers, episodes, env, generator, carry,
                 iteration=iteration, frames=frames, elapsed=time.perf_counter() - started))
     bar.close()
     env.close()
-    if eval_env is not None:
-        eval_env.close()
+    for extra_env in (eval_env, record_env):
+        if extra_env is not None:
+            extra_env.close()
     lock.close()
     print(f"done: {frames} frames in {iteration} iterations; run directory: {run_dir}",
           flush=True)
@@ -391,6 +397,30 @@ def evaluate(config: TrainConfig, env: BatchedLaneKeepingEnv, learner: Learner, 
                  and summary.J_coll <= config.algo.collision.threshold)
     return {"iteration": iteration, "frames": frames, "time_s": time_s, **summary.as_row(),
             "episode_length": summary.length, "satisfied": int(satisfied)}
+
+
+def record_iteration(config: TrainConfig, env: BatchedLaneKeepingEnv, learner: Learner,
+                     multipliers: dict[str, Multiplier], iteration: int) -> None:
+    """Records one deterministic evaluation episode to
+    ``<run_dir>/recordings/iteration_<iteration>.rrd`` (and the live viewer, if any). Files of
+    one run share a recording id, so opened together they line up on the ``iteration``
+    timeline. A recording that fails is a warning: training goes on."""
+    from crllk.record import record_episodes  # rerun is imported only when recording
+
+    run_dir = config.resolved_run_dir()
+    path = run_dir / "recordings" / f"iteration_{iteration:06d}.rrd"
+    env.set_seed(config.eval.seed)
+    try:
+        report = record_episodes(env, learner.actor, 1, path, viewer=config.viewer,
+                                 iteration=iteration,
+                                 multipliers={c: m.value for c, m in multipliers.items()},
+                                 recording_id=f"crllk-train-{run_dir.resolve()}")
+    except Exception as err:  # a recording never ends a training run
+        print(f"warning: recording at iteration {iteration} failed: {err}", file=sys.stderr,
+              flush=True)
+        return
+    for message in report.warnings:
+        print(f"warning: {message}", file=sys.stderr, flush=True)
 
 
 # ----- checkpoints -------------------------------------------------------------------------

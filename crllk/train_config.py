@@ -105,6 +105,8 @@ class TrainConfig:
     threads: int = 1
     checkpoint_every: int = 10
     progress: bool = True
+    record_every: int = 0
+    viewer: str = "none"
     ppo: PPOConfig = field(default_factory=PPOConfig)
     model: ModelSchema = field(default_factory=ModelSchema)
     eval: EvalConfig = field(default_factory=EvalConfig)
@@ -144,12 +146,14 @@ _CHOICES = {
     "obs.name": ("state", "pixels"),
     "model.encoder": ("fast", "original"),
     "model.critic_input": ("observation", "state"),
+    "viewer": ("none", "spawn", "serve"),
 }
 _POSITIVE = ("total_frames", "num_envs", "rollout_steps", "threads", "checkpoint_every",
              "ppo.epochs", "ppo.minibatch_size", "ppo.lr", "ppo.max_grad_norm",
              "model.hidden", "model.feature_dim", "eval.episodes", "eval.num_envs",
              "algo.lane.step_size", "algo.collision.step_size", "reward_scale")
-_NON_NEGATIVE = ("seed", "eval.every", "eval.seed", "ppo.entropy_coeff", "ppo.critic_coeff",
+_NON_NEGATIVE = ("seed", "eval.every", "record_every", "eval.seed", "ppo.entropy_coeff",
+                 "ppo.critic_coeff",
                  "algo.lane.threshold", "algo.lane.initial", "algo.lane.kp", "algo.lane.kd",
                  "algo.collision.threshold", "algo.collision.initial", "algo.collision.kp",
                  "algo.collision.kd", "action.baseline_collision_weight")
