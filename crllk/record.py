@@ -4,7 +4,9 @@
 
 :func:`record_episodes` plays episodes of sub-environment 0 of a
 :class:`~crllk.envs.BatchedLaneKeepingEnv` and logs them to a ``.rrd`` file and/or a live
-viewer. This is the only module of crllk that imports rerun.
+viewer. This is the only module of crllk that imports the rerun package: the map's lane and
+marking polylines come from :mod:`crllk.maps.markings` (numpy) and the viewer process
+(probing the port, running the ``rerun`` executable) from :mod:`crllk.viewer`.
 
 Timelines: ``step`` (control steps since the recording began), ``sim_time`` (simulated seconds
 since the recording began, ``step`` x control timestep), ``episode`` (index of the episode in
@@ -31,13 +33,7 @@ from __future__ import annotations
 
 import argparse
 import math
-import os
-import re
-import shutil
-import socket
-import subprocess
 import sys
-import tempfile
 import time
 import warnings
 from collections.abc import Callable, Iterator, Sequence
@@ -57,22 +53,18 @@ from torchrl.envs.utils import ExplorationType, set_exploration_type, step_mdp
 
 from crllk.episodes import EpisodeAccumulator, EpisodeStats
 from crllk.follower import FollowerPolicy
-from crllk.maps import DuckietownMap, Lane
-from crllk.maps.lanes import LANE_OFFSET, OPPOSITE, RIGHT_OF
-from crllk.maps.road import openings
+from crllk.maps import DuckietownMap
+from crllk.maps.markings import (
+    LANE_HEIGHT,
+    lane_centre_strips,
+    white_marking_strips,
+    yellow_marking_strips,
+)
 from crllk.sim import constants as C
 from crllk.sim.physics import Physics
-from crllk.sim.texture import (
-    _DASH_LENGTH,
-    _GAP_LENGTH,
-    _WHITE_INNER,
-    _WHITE_WIDTH,
-    DECOR_RGB,
-    ROAD_RGB,
-    WHITE_RGB,
-    YELLOW_RGB,
-)
+from crllk.sim.texture import DECOR_RGB, ROAD_RGB, WHITE_RGB, WHITE_WIDTH, YELLOW_RGB
 from crllk.task_config import CameraConfig
+from crllk.viewer import VIEWER_HOST, VIEWER_PORT, check_port_free, spawn_viewer
 
 if TYPE_CHECKING:
     from crllk.envs import BatchedLaneKeepingEnv
@@ -118,26 +110,6 @@ ACTION_ENTITY_PATHS = {"discrete": ("action/index",),
 
 # ----- constants --------------------------------------------------------------------------
 VIEWERS = ("none", "spawn", "serve")
-VIEWER_HOST = "127.0.0.1"
-"""Spawned and served viewers listen on this address only."""
-VIEWER_PORT = 9876
-"""gRPC port of a spawned or served viewer."""
-_SPAWN_TIMEOUT = 15.0
-"""How long a spawned viewer may take to listen (s)."""
-_PROBE_TIMEOUT = 1.0
-"""How long a listener on the viewer port may take to answer an HTTP/2 preface (s)."""
-_HTTP2_PREFACE = b"PRI * HTTP/2.0\r\n\r\nSM\r\n\r\n" + bytes([0, 0, 0, 4, 0, 0, 0, 0, 0])
-"""The HTTP/2 client preface and an empty SETTINGS frame; gRPC servers answer with theirs."""
-_HTTP2_SETTINGS = 4
-"""Frame type of an HTTP/2 SETTINGS frame (byte 3 of the frame header)."""
-_SPAWN_GRACE = 1.0
-"""A spawned viewer must still run this long after it listens (s); one without a display
-listens first and exits right after."""
-_LINE_SPACING = 0.02
-"""Sample spacing of lane and marking polylines (m)."""
-_MARKING_HEIGHT = 0.002
-_LANE_HEIGHT = 0.004
-"""Heights of marking and lane-centre lines above the floor (m), drawn over the tiles."""
 _TILE_THICKNESS = 0.002
 """Tiles are flat boxes this thick, top face at z = 0 (m)."""
 _SCALAR_BATCH = 30
@@ -145,8 +117,6 @@ _SCALAR_BATCH = 30
 of every episode."""
 _CAMERA_PLANE = 0.08
 """Distance of the camera image plane drawn in 3D from the camera (m)."""
-_ANSI = re.compile(r"\x1b\[[0-9;]*m")
-"""Terminal colour codes in the viewer's log."""
 _LANE_RGB = (230, 40, 200)
 _TRAIL_RGB = (40, 170, 255)
 _ROBOT_RGB = (250, 215, 40)
@@ -188,57 +158,7 @@ class RecordingReport:
     """Where a live viewer received or served the recording."""
 
 
-# ----- map geometry -----------------------------------------------------------------------
-def lane_polyline(lane: Lane, lateral: float = 0.0, start: float = 0.0,
-                  stop: float | None = None, z: float = 0.0) -> np.ndarray:
-    """Points ``[K, 3]`` along ``lane`` from ``start`` to ``stop`` m (default: its end),
-    ``lateral`` m right of its centre line, at height ``z`` (m)."""
-    stop = lane.length if stop is None else stop
-    count = max(2, math.ceil((stop - start) / _LINE_SPACING) + 1)
-    points = [lane.point_at(a, lateral)[:2] for a in np.linspace(start, stop, count)]
-    return np.column_stack([np.asarray(points), np.full(count, z)])
-
-
-def lane_centre_strips(dmap: DuckietownMap) -> list[np.ndarray]:
-    """The centre line of every lane of the map (both directions, every turn)."""
-    return [lane_polyline(lane, z=_LANE_HEIGHT) for lane in dmap.lanes]
-
-
-def white_lateral(tile_size: float) -> float:
-    """Offset of the white edge tape's middle right of the lane centre (m), as the floor
-    texture (:mod:`crllk.sim.texture`) paints it."""
-    return tile_size / 2 - _WHITE_INNER - _WHITE_WIDTH / 2 - LANE_OFFSET
-
-
-def white_marking_strips(dmap: DuckietownMap) -> list[np.ndarray]:
-    """White edge tape: right of every lane on straights and curves; along the closed side of
-    intersections (right of the straight lanes whose right side has no opening)."""
-    lateral = white_lateral(dmap.tile_size)
-    strips = []
-    for lane in dmap.lanes:
-        tile = dmap.tile(lane.column, lane.row)
-        heading = OPPOSITE[lane.entry]
-        closed_right = lane.turn == 0 and RIGHT_OF[heading] not in openings(tile)
-        if tile.kind in ("straight", "curve_left", "curve_right") or closed_right:
-            strips.append(lane_polyline(lane, lateral, z=_MARKING_HEIGHT))
-    return strips
-
-
-def yellow_marking_strips(dmap: DuckietownMap) -> list[np.ndarray]:
-    """Dashed yellow centre tape of straights and curves (one dash per strip), drawn along one
-    lane of each tile at the road centre line."""
-    strips = []
-    period = _DASH_LENGTH + _GAP_LENGTH
-    for tile in dmap.road_tiles:
-        if tile.kind not in ("straight", "curve_left", "curve_right"):
-            continue
-        lane = dmap.tile_lanes(tile.column, tile.row)[0]
-        for start in np.arange(0.0, lane.length, period):
-            stop = min(start + _DASH_LENGTH, lane.length)
-            strips.append(lane_polyline(lane, -LANE_OFFSET, start, stop, _MARKING_HEIGHT))
-    return strips
-
-
+# ----- map boxes --------------------------------------------------------------------------
 def tile_boxes(dmap: DuckietownMap) -> rr.Boxes3D:
     """Every tile as a flat solid box coloured as the floor texture colours it."""
     s = dmap.tile_size
@@ -350,7 +270,7 @@ class _Recorder:
         rec.log(LANES, rr.LineStrips3D(lane_centre_strips(dmap), colors=_LANE_RGB, radii=0.004),
                 static=True)
         rec.log(WHITE_MARKINGS, rr.LineStrips3D(white_marking_strips(dmap), colors=WHITE_RGB,
-                                                radii=_WHITE_WIDTH / 2), static=True)
+                                                radii=WHITE_WIDTH / 2), static=True)
         rec.log(YELLOW_MARKINGS, rr.LineStrips3D(yellow_marking_strips(dmap), colors=YELLOW_RGB,
                                                  radii=0.012), static=True)
         rec.log(OBJECTS, object_boxes(dmap), static=True)
@@ -400,7 +320,7 @@ class _Recorder:
 
     def start_episode(self, pose: tuple[float, float, float]) -> None:
         """An episode begins at ``pose`` (its spawn): clear the trail, log the event."""
-        self.trail = [(pose[0], pose[1], _LANE_HEIGHT)]
+        self.trail = [(pose[0], pose[1], LANE_HEIGHT)]
         self._set_time()
         x, y, yaw = pose
         self.rec.log(EVENTS, rr.TextLog(f"episode {self.episode} starts at x {x:.3f} m, "
@@ -412,7 +332,7 @@ class _Recorder:
         self.steps += 1
         self._set_time()
         x, y, yaw = step.pose
-        self.trail.append((x, y, _LANE_HEIGHT))
+        self.trail.append((x, y, LANE_HEIGHT))
         rec.log(ROBOT, rr.Transform3D(translation=(x, y, C.WHEEL_RADIUS), quaternion=rr.Quaternion(
             xyzw=[0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2)])))
         rec.log(TRAIL, rr.LineStrips3D([self.trail]))
@@ -492,91 +412,6 @@ def check_writable(path: str | Path) -> Path:
     return path
 
 
-def _port_state(port: int) -> str:
-    """``"free"``, ``"grpc"`` (an HTTP/2 server, such as a rerun viewer, answers on
-    ``VIEWER_HOST:port``) or ``"other"`` (something listens and does not answer: a rerun
-    stream connected to it would hang when closed)."""
-    try:
-        with socket.create_connection((VIEWER_HOST, port), timeout=_PROBE_TIMEOUT) as probe:
-            probe.sendall(_HTTP2_PREFACE)
-            frame = probe.recv(9)
-    except ConnectionRefusedError:
-        return "free"
-    except OSError:
-        return "other"
-    return "grpc" if len(frame) == 9 and frame[3] == _HTTP2_SETTINGS else "other"
-
-
-def _check_port_free(port: int) -> None:
-    """Raise OSError when ``VIEWER_HOST:port`` cannot be bound (taken)."""
-    with socket.socket() as probe:
-        probe.bind((VIEWER_HOST, port))
-
-
-def _viewer_executable() -> str | None:
-    """The ``rerun`` viewer: on PATH, else beside the running Python (an unactivated venv)."""
-    found = shutil.which("rerun")
-    if found:
-        return found
-    beside = Path(sys.executable).parent / "rerun"
-    return str(beside) if beside.is_file() and os.access(beside, os.X_OK) else None
-
-
-def spawn_viewer(port: int = VIEWER_PORT) -> str:
-    """Start a native viewer listening on ``127.0.0.1:port`` (or reuse one already there) and
-    return its gRPC URL.
-
-    Raises:
-        RuntimeError: with the reason when no viewer runs (no executable, no display, ...).
-    """
-    url = f"rerun+http://{VIEWER_HOST}:{port}/proxy"
-    state = _port_state(port)
-    if state == "grpc":
-        return url
-    if state == "other":
-        raise RuntimeError(f"{VIEWER_HOST}:{port} is taken by something that is not a viewer")
-    executable = _viewer_executable()
-    if executable is None:
-        raise RuntimeError(f"no `rerun` executable on PATH or in {Path(sys.executable).parent}")
-    with tempfile.TemporaryFile() as log:
-        process = subprocess.Popen(
-            [executable, "--port", str(port), "--bind", VIEWER_HOST],
-            stdout=subprocess.DEVNULL, stderr=log, start_new_session=True,
-            env={**os.environ, "RERUN_APP_ONLY": "true"})
-        if _wait_listening(process, port) and _still_running(process, _SPAWN_GRACE):
-            return url
-        if process.poll() is None:
-            process.kill()
-        process.wait()
-        log.seek(0)
-        reason = _last_error_line(log.read().decode(errors="replace"))
-    raise RuntimeError(f"the viewer `{executable}` did not start: {reason}")
-
-
-def _wait_listening(process: subprocess.Popen, port: int) -> bool:
-    deadline = time.monotonic() + _SPAWN_TIMEOUT
-    while time.monotonic() < deadline and process.poll() is None:
-        if _port_state(port) == "grpc":
-            return True
-        time.sleep(0.1)
-    return False
-
-
-def _still_running(process: subprocess.Popen, seconds: float) -> bool:
-    try:
-        process.wait(timeout=seconds)
-    except subprocess.TimeoutExpired:
-        return True
-    return False
-
-
-def _last_error_line(text: str) -> str:
-    """The most telling line of a viewer's log: its last error, colour codes removed."""
-    lines = [line.strip() for line in _ANSI.sub("", text).splitlines() if line.strip()]
-    errors = [line for line in lines if "error" in line.lower() or "panicked" in line]
-    return (errors or lines or ["it exited without a message"])[-1]
-
-
 def _open_sinks(path: Path | None, viewer: str, problems: list[str]
                 ) -> tuple[list, str | None]:
     """The sinks for ``path`` and ``viewer``; an unreachable viewer becomes a warning."""
@@ -587,7 +422,7 @@ def _open_sinks(path: Path | None, viewer: str, problems: list[str]
             url = spawn_viewer(VIEWER_PORT)
             sinks.append(rr.GrpcSink(url))
         elif viewer == "serve":
-            _check_port_free(VIEWER_PORT)  # rerun's server would fail later, at the flush
+            check_port_free(VIEWER_PORT)  # rerun's server would fail later, at the flush
             server = rr.GrpcServerSink(VIEWER_HOST, VIEWER_PORT)
             url = server.uri
             sinks.append(server)

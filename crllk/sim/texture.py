@@ -24,12 +24,14 @@ YELLOW_RGB = (238, 225, 77)
 DECOR_RGB = {"asphalt": (62, 58, 51), "floor": (149, 154, 82), "grass": (93, 129, 44),
              "empty": (30, 30, 34)}
 
-_WHITE_INNER = 0.015
+WHITE_INNER = 0.015
 """Distance of the white tape's outer edge from the tile edge (m)."""
-_WHITE_WIDTH = 0.048
-_YELLOW_WIDTH = 0.024
-_DASH_LENGTH = 0.05
-_GAP_LENGTH = 0.025
+WHITE_WIDTH = 0.048
+YELLOW_WIDTH = 0.024
+"""Widths of the white edge tape and of the yellow centre tape (m)."""
+DASH_LENGTH = 0.05
+GAP_LENGTH = 0.025
+"""Length of the yellow dashes and of the gaps between them (m)."""
 
 PIXELS_PER_TILE = 128
 """Texels along one tile edge (4.6 mm per texel for 0.585 m tiles)."""
@@ -51,8 +53,8 @@ def _tile_classes(tile: Tile, u: np.ndarray, v: np.ndarray, s: float) -> np.ndar
         cu, cv = (ex + ox) * s / 2, (ey + oy) * s / 2
         r = np.hypot(u - cu, v - cv)
         arc = (s / 2) * np.arctan2(np.abs(v - cv), np.abs(u - cu))
-        white = ((r >= _WHITE_INNER) & (r <= _WHITE_INNER + _WHITE_WIDTH)) | (
-            (r >= s - _WHITE_INNER - _WHITE_WIDTH) & (r <= s - _WHITE_INNER))
+        white = ((r >= WHITE_INNER) & (r <= WHITE_INNER + WHITE_WIDTH)) | (
+            (r >= s - WHITE_INNER - WHITE_WIDTH) & (r <= s - WHITE_INNER))
         classes[white] = 1
         classes[_yellow(r - s / 2, arc)] = 2
     else:  # intersections: white tape along every closed side
@@ -61,21 +63,21 @@ def _tile_classes(tile: Tile, u: np.ndarray, v: np.ndarray, s: float) -> np.ndar
                 continue
             ex, ey = _unit(edge)
             depth = s / 2 - (u * ex + v * ey)
-            classes[(depth >= _WHITE_INNER) & (depth <= _WHITE_INNER + _WHITE_WIDTH)] = 1
+            classes[(depth >= WHITE_INNER) & (depth <= WHITE_INNER + WHITE_WIDTH)] = 1
     return classes
 
 
 def _draw_bands(classes: np.ndarray, across: np.ndarray, along: np.ndarray, s: float,
                 centre_line: bool) -> None:
     edge_distance = s / 2 - across
-    classes[(edge_distance >= _WHITE_INNER) & (edge_distance <= _WHITE_INNER + _WHITE_WIDTH)] = 1
+    classes[(edge_distance >= WHITE_INNER) & (edge_distance <= WHITE_INNER + WHITE_WIDTH)] = 1
     if centre_line:
         classes[_yellow(across, along)] = 2
 
 
 def _yellow(offset: np.ndarray, along: np.ndarray) -> np.ndarray:
-    period = _DASH_LENGTH + _GAP_LENGTH
-    return (np.abs(offset) <= _YELLOW_WIDTH / 2) & (np.mod(along, period) < _DASH_LENGTH)
+    period = DASH_LENGTH + GAP_LENGTH
+    return (np.abs(offset) <= YELLOW_WIDTH / 2) & (np.mod(along, period) < DASH_LENGTH)
 
 
 def _unit(edge: str) -> tuple[float, float]:
