@@ -21,3 +21,12 @@ class ConfigError(ValueError):
 
 class MapError(ConfigError):
     """A Duckietown map description that cannot be built."""
+
+
+class RecordingError(ConfigError):
+    """A recording that cannot be written: ``<path>: cannot write the recording: <reason>``."""
+
+    def __init__(self, path: str | Path, reason: str) -> None:
+        self.path = str(path)
+        self.reason = reason
+        super().__init__(path, "cannot write the recording", reason)

@@ -36,6 +36,7 @@ from crllk.errors import ConfigError
 from crllk.evaluation import EvaluationResult, run_episodes
 from crllk.follower import FollowerPolicy
 from crllk.runs import EVAL_FILE, load_actor, load_run_config
+from crllk.train import build_env
 
 SOURCE = "evaluate"
 DEFAULT_SEED = 1_000_000
@@ -119,8 +120,7 @@ def evaluate_run(run_dir: str | Path, *, episodes: int, deterministic: bool = Tr
     """Plays the run's checkpoint and writes ``<run_dir>/eval.json``; returns its content."""
     config = load_run_config(run_dir)
     seed = config.eval.seed if seed is None else seed
-    env = make_env(config.task_source(), num_envs=num_envs, observation=config.obs.name,
-                   action=config.action.name, seed=seed, overrides=config.task_overrides())
+    env = build_env(config, num_envs=num_envs, seed=seed)
     try:
         actor, info = load_actor(run_dir, env)
         result = run_episodes(env, actor, episodes, deterministic=deterministic)
@@ -161,14 +161,12 @@ def record_run(run_dir: str | Path, *, episodes: int, seed: int | None = None,
     :func:`evaluate_run`) to ``<run_dir>/recordings/eval.rrd``; returns the path.
 
     Raises:
-        crllk.record.RecordingError: if the file cannot be written.
+        crllk.errors.RecordingError: if the file cannot be written (a ConfigError).
     """
     from crllk.record import record_episodes  # rerun is imported only when recording
 
     config = load_run_config(run_dir)
-    env = make_env(config.task_source(), num_envs=1, observation=config.obs.name,
-                   action=config.action.name, overrides=config.task_overrides(),
-                   seed=config.eval.seed if seed is None else seed)
+    env = build_env(config, num_envs=1, seed=config.eval.seed if seed is None else seed)
     path = Path(run_dir) / "recordings" / "eval.rrd"
     try:
         actor, info = load_actor(run_dir, env)
@@ -266,9 +264,6 @@ def main(argv: Sequence[str] | None = None) -> int:
             Path(config.out).parent.mkdir(parents=True, exist_ok=True)
             atomic_write_text(config.out, json.dumps(output, indent=1) + "\n")
     except ConfigError as err:
-        print(f"error: {err}", file=sys.stderr)
-        return 2
-    except ValueError as err:  # crllk.record.RecordingError: the recording cannot be written
         print(f"error: {err}", file=sys.stderr)
         return 2
     return 0

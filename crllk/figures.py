@@ -22,8 +22,8 @@ from torchrl.envs.utils import ExplorationType, set_exploration_type, step_mdp
 
 from crllk.actions import DISCRETE_NAMES
 from crllk.checkpoint import atomic_write
-from crllk.envs import make_env
 from crllk.runs import load_actor, load_run_config, read_eval_json, read_metrics
+from crllk.train import build_env
 
 SMOOTHING_ITERATIONS = 10
 """Window (iterations) of the moving average over training curves."""
@@ -92,9 +92,7 @@ def policy_trajectory(run_dir: str | Path, *, seed: int | None = None,
     from crllk.pictures import topdown
 
     config = load_run_config(run_dir)
-    env = make_env(config.task_source(), num_envs=1, observation=config.obs.name,
-                   action=config.action.name, overrides=config.task_overrides(),
-                   seed=config.eval.seed if seed is None else seed)
+    env = build_env(config, num_envs=1, seed=config.eval.seed if seed is None else seed)
     try:
         actor, _ = load_actor(run_dir, env)
         physics, task = env.physics[0], env.tasks[0]

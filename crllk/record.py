@@ -52,6 +52,7 @@ from tensordict import TensorDictBase
 from torchrl.envs.utils import ExplorationType, set_exploration_type, step_mdp
 
 from crllk.episodes import EpisodeAccumulator, EpisodeStats
+from crllk.errors import RecordingError
 from crllk.follower import FollowerPolicy
 from crllk.maps import DuckietownMap
 from crllk.maps.markings import (
@@ -124,16 +125,6 @@ _OBJECT_RGB = {"duckie": (250, 215, 40), "cone": (245, 105, 15), "barrier": (220
                "duckiebot": (40, 40, 45), "bus": (240, 190, 25), "truck": (50, 100, 200),
                "tree": (50, 140, 50), "sign_blank": (235, 235, 235)}
 """Box colour of each object kind (the main colour of its parts in the MuJoCo scene)."""
-
-
-class RecordingError(ValueError):
-    """A recording that cannot be written; reads ``<path>: cannot write the recording: ...``
-    (like :class:`crllk.errors.ConfigError`, one line naming the file and the problem)."""
-
-    def __init__(self, path: str | Path, reason: str) -> None:
-        self.path = str(path)
-        self.reason = reason
-        super().__init__(f"{self.path}: cannot write the recording: {reason}")
 
 
 @dataclass(frozen=True)

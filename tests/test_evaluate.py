@@ -141,3 +141,14 @@ def test_a_directory_without_a_run_fails_clearly(tmp_path):
                             cwd=REPO, capture_output=True, text=True, timeout=120)
     assert result.returncode == 2
     assert "not a run directory" in result.stderr and "Traceback" not in result.stderr
+
+
+def test_a_pixel_run_with_state_critics_evaluates_and_draws(tmp_path):
+    """Pixel policies whose critics read the state features rebuild their env with that state."""
+    from crllk.figures import policy_trajectory
+
+    run = run_in_process(tmp_path / "pixels", 1, ["obs=pixels", "model.critic_input=state"])
+    document = evaluate_run(run, episodes=2, num_envs=2, seed=1)
+    assert document["source"]["obs"] == "pixels" and len(document["episodes"]) == 2
+    episode = policy_trajectory(run)
+    assert len(episode["trail"]) == len(episode["lane_costs"]) + 1
