@@ -53,6 +53,7 @@ from crllk.lane_keeping import (
 )
 from crllk.sim.physics import Physics
 from crllk.task_config import TaskConfig, load_task_config
+from crllk.teacher import Teacher
 
 COST_KEYS = ("cost_lane", "cost_collision")
 """Reward-like keys that carry the per-step costs next to ``"reward"``."""
@@ -71,7 +72,8 @@ class BatchedLaneKeepingEnv(EnvBase):
 
     def __init__(self, config: TaskConfig, *, num_envs: int = 1, observation: str = "pixels",
                  action: str = "discrete", seed: int | None = None,
-                 privileged_state: bool = False, device: torch.device | str = "cpu"):
+                 privileged_state: bool = False, teacher: bool = False,
+                 device: torch.device | str = "cpu"):
         if num_envs < 1:
             raise ValueError(f"num_envs must be at least 1, got {num_envs}")
         if observation not in OBSERVATIONS:
@@ -96,6 +98,16 @@ class BatchedLaneKeepingEnv(EnvBase):
         self.privileged_state = privileged_state and observation == "pixels"
         """Whether pixel observations come with the ``"state"`` features too (for critics)."""
         self._states = np.zeros((num_envs, len(state_feature_names(config))), np.float32)
+        self.teachers = ([Teacher(config, task.obstacles, action) for task in self.tasks]
+                         if teacher else [])
+        """With ``teacher``, observations carry ``"teacher_action"``: the privileged teacher's
+        action (:mod:`crllk.teacher`) for the state observed, while :attr:`teacher_active`."""
+        self.teacher_active = teacher
+        self._teacher_actions = np.zeros((num_envs, *(() if action == "discrete" else (2,))),
+                                         np.int64 if action == "discrete" else np.float32)
+        self.reports_encounters = config.spawn.encounters > 0
+        """Whether observations carry ``"encounter"``: the episode started in front of an
+        obstacle (``spawn.encounters``), so that metrics can leave such episodes out."""
         self._make_specs()
         self._set_seed(seed)
 
@@ -120,18 +132,24 @@ class BatchedLaneKeepingEnv(EnvBase):
         if self.privileged_state:
             entries["state"] = Unbounded(shape=self._states.shape, dtype=torch.float32,
                                          device=self.device)
+        if self.reports_encounters:
+            entries["encounter"] = Categorical(2, shape=(*n, 1), dtype=torch.bool,
+                                               device=self.device)
+        if self.teachers:
+            entries["teacher_action"] = self._action_spec_of(n)
         self.observation_spec = Composite(entries, shape=n, device=self.device)
-        if self.action_type == "discrete":
-            self.action_spec = Categorical(3, shape=n, dtype=torch.int64, device=self.device)
-        else:
-            self.action_spec = Bounded(-1.0, 1.0, shape=(*n, 2), dtype=torch.float32,
-                                       device=self.device)
+        self.action_spec = self._action_spec_of(n)
         self.reward_spec = Composite(
             {key: Unbounded(shape=(*n, 1), dtype=torch.float32, device=self.device)
              for key in ("reward", *COST_KEYS)}, shape=n, device=self.device)
         self.done_spec = Composite(
             {key: Categorical(2, shape=(*n, 1), dtype=torch.bool, device=self.device)
              for key in DONE_KEYS}, shape=n, device=self.device)
+
+    def _action_spec_of(self, n: torch.Size) -> TensorSpec:
+        if self.action_type == "discrete":
+            return Categorical(3, shape=n, dtype=torch.int64, device=self.device)
+        return Bounded(-1.0, 1.0, shape=(*n, 2), dtype=torch.float32, device=self.device)
 
     # ----- seeding ----------------------------------------------------------------------
     def _set_seed(self, seed: int | None) -> None:
@@ -166,11 +184,17 @@ class BatchedLaneKeepingEnv(EnvBase):
         self._observations[i] = task.main_observation(physics)
         if self.privileged_state:
             self._states[i] = task.state_feature_list(physics)
+        if self.teacher_active and self.teachers:
+            self._teacher_actions[i] = self.teachers[i].action(physics)
 
     def _observation_entries(self) -> dict[str, torch.Tensor]:
         entries = {self.observation_type: torch.from_numpy(self._observations.copy())}
         if self.privileged_state:
             entries["state"] = torch.from_numpy(self._states.copy())
+        if self.reports_encounters:
+            entries["encounter"] = torch.tensor([[task.encounter] for task in self.tasks])
+        if self.teachers:
+            entries["teacher_action"] = torch.from_numpy(self._teacher_actions.copy())
         return entries
 
     def _step(self, tensordict: TensorDictBase) -> TensorDictBase:
@@ -248,7 +272,7 @@ class BatchedLaneKeepingEnv(EnvBase):
         """The constructor arguments a snapshot must agree on."""
         return {"task": self.config.name, "num_envs": self.num_envs,
                 "observation": self.observation_type, "action": self.action_type,
-                "privileged_state": self.privileged_state}
+                "privileged_state": self.privileged_state, "teacher": bool(self.teachers)}
 
     # ----- teardown ---------------------------------------------------------------------
     def close(self, *, raise_if_closed: bool = True) -> None:
@@ -272,7 +296,7 @@ def _build_physics(config: TaskConfig, num_envs: int, *, share_renderers: bool) 
 def make_env(task: str | Path, *, num_envs: int = 1, observation: str = "pixels",
              action: str = "discrete", seed: int | None = None,
              overrides: dict[str, Any] | None = None, privileged_state: bool = False,
-             device: torch.device | str = "cpu") -> BatchedLaneKeepingEnv:
+             teacher: bool = False, device: torch.device | str = "cpu") -> BatchedLaneKeepingEnv:
     """A TorchRL environment with ``num_envs`` lane-keeping simulations in one process.
 
     Args:
@@ -286,12 +310,14 @@ def make_env(task: str | Path, *, num_envs: int = 1, observation: str = "pixels"
         privileged_state: with pixels, also return the ``"state"`` features (float32
             ``[N, F]``) for critics that may see what the policy cannot (asymmetric
             actor-critic); the policy still reads only ``"pixels"``.
+        teacher: also return ``"teacher_action"``, the privileged teacher's action for each
+            observation (:mod:`crllk.teacher`), for an imitation loss.
         device: where the returned tensors live (simulation runs on the CPU).
     """
     config = load_task_config(task, overrides)
     return BatchedLaneKeepingEnv(config, num_envs=num_envs, observation=observation,
                                  action=action, seed=seed, privileged_state=privileged_state,
-                                 device=device)
+                                 teacher=teacher, device=device)
 
 
 __all__ = ["COST_KEYS", "BatchedLaneKeepingEnv", "make_env", "sub_env_seeds"]

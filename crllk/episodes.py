@@ -27,6 +27,7 @@ class EpisodeStats:
     collisions: float  # collisions and road departures in the episode
     length: int  # control steps
     truncated: bool  # ended by the time limit, not by the task
+    encounter: bool = False  # started in front of an obstacle (training spawns only)
 
     def as_row(self) -> dict[str, Any]:
         return asdict(self)
@@ -46,16 +47,20 @@ class EpisodeAccumulator:
         """Adds transitions of shape ``[N, T]`` (time last) and returns the episodes that
         ended in them, in the order they ended."""
         nxt = batch["next"]
-        columns = [nxt[key].reshape(self.num_envs, -1).numpy()
-                   for key in ("reward", "cost_lane", "cost_collision", "done", "truncated")]
+        keys = ["reward", "cost_lane", "cost_collision", "done", "truncated"]
+        if "encounter" in nxt:
+            keys.append("encounter")
+        columns = [nxt[key].reshape(self.num_envs, -1).numpy() for key in keys]
         finished: list[EpisodeStats] = []
         for t in range(columns[0].shape[1]):
             finished += self.add_step(*(column[:, t] for column in columns))
         return finished
 
     def add_step(self, reward: np.ndarray, cost_lane: np.ndarray, cost_collision: np.ndarray,
-                 done: np.ndarray, truncated: np.ndarray) -> list[EpisodeStats]:
-        """Adds one step of every sub-environment (arrays of shape ``[N]``)."""
+                 done: np.ndarray, truncated: np.ndarray,
+                 encounter: np.ndarray | None = None) -> list[EpisodeStats]:
+        """Adds one step of every sub-environment (arrays of shape ``[N]``); ``encounter``
+        flags episodes that started in front of an obstacle."""
         self.distance += reward
         self.lane_cost += cost_lane
         self.collisions += cost_collision
@@ -66,7 +71,8 @@ class EpisodeAccumulator:
                 env_index=int(i), distance=float(self.distance[i]),
                 lane_cost=float(self.lane_cost[i] / self.length[i]),
                 collisions=float(self.collisions[i]), length=int(self.length[i]),
-                truncated=bool(truncated[i])))
+                truncated=bool(truncated[i]),
+                encounter=False if encounter is None else bool(encounter[i])))
             self.distance[i] = self.lane_cost[i] = self.collisions[i] = 0.0
             self.length[i] = 0
         return finished

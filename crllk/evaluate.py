@@ -32,6 +32,7 @@ from omegaconf.errors import OmegaConfBaseException
 from crllk.actions import DISCRETE_NAMES
 from crllk.checkpoint import atomic_write_text
 from crllk.envs import make_env
+from crllk.episodes import summarise
 from crllk.errors import ConfigError
 from crllk.evaluation import EvaluationResult, run_episodes
 from crllk.follower import FollowerPolicy
@@ -79,7 +80,7 @@ def action_histogram(actions: Sequence[np.ndarray], action: str) -> dict[str, An
         counts = np.bincount(flat[:, 0].astype(np.int64), minlength=len(DISCRETE_NAMES))
         return {name: float(c / counts.sum()) for name, c in zip(DISCRETE_NAMES, counts,
                                                                    strict=True)}
-    names = ("velocity", "steering") if action == "continuous" else ("left", "right")
+    names = ("left", "right") if action == "duty" else ("velocity", "steering")
     return {"bin_edges": CONTINUOUS_BINS.tolist(),
             **{name: np.histogram(np.clip(flat[:, k], -1, 1), CONTINUOUS_BINS)[0].tolist()
                for k, name in enumerate(names)},
@@ -91,7 +92,8 @@ def episode_rows(result: EvaluationResult, action: str) -> list[dict[str, Any]]:
     for k, (stats, termination, actions) in enumerate(
             zip(result.episodes, result.terminations, result.actions, strict=True)):
         reason = termination or ("time_limit" if stats.truncated else None)
-        row = {"episode": k, **stats.as_row(), "termination": reason}
+        row = {"episode": k, **stats.as_row(), "termination": reason,
+               "direction": _at(result.directions, k), "hit_object": _at(result.hit_objects, k)}
         if action == "discrete":
             counts = np.bincount(np.asarray(actions).reshape(-1).astype(np.int64),
                                  minlength=len(DISCRETE_NAMES))
@@ -100,9 +102,33 @@ def episode_rows(result: EvaluationResult, action: str) -> list[dict[str, Any]]:
     return rows
 
 
+def _at(values: Sequence[Any], k: int) -> Any:
+    return values[k] if k < len(values) else None
+
+
+def breakdown(result: EvaluationResult, objects: Sequence[Any] = ()) -> dict[str, Any]:
+    """The metrics per start direction of the loop, and how many episodes ended on each
+    obstacle (``objects``: the map's, to name them by kind and position)."""
+    by_direction = {}
+    for direction in ("intended", "reverse"):
+        chosen = [e for e, d in zip(result.episodes, result.directions, strict=True)
+                  if d == direction]
+        if chosen:
+            by_direction[direction] = summarise(chosen).as_row()
+    hits: dict[str, int] = {}
+    for index in result.hit_objects:
+        if index is not None:
+            obj = objects[index] if index < len(objects) else None
+            name = f"{index}" if obj is None else f"{index} {obj.kind} ({obj.x:.2f}, {obj.y:.2f})"
+            hits[name] = hits.get(name, 0) + 1
+    return {"by_direction": by_direction, "collisions_by_object": dict(sorted(hits.items()))}
+
+
 def result_document(result: EvaluationResult, action: str, *, thresholds: dict[str, float],
-                    settings: dict[str, Any], source: dict[str, Any]) -> dict[str, Any]:
-    """The ``eval.json`` content of one evaluation."""
+                    settings: dict[str, Any], source: dict[str, Any],
+                    objects: Sequence[Any] = ()) -> dict[str, Any]:
+    """The ``eval.json`` content of one evaluation (``objects``: the map's, named in the
+    breakdown of collisions)."""
     s = result.summary
     rows = episode_rows(result, action)
     summary = {"J_R": s.J_R, "J_clane": s.J_clane, "J_coll": s.J_coll,
@@ -112,6 +138,7 @@ def result_document(result: EvaluationResult, action: str, *, thresholds: dict[s
     return {"source": source, "evaluation": settings, "thresholds": thresholds,
             "summary": summary, "action_histogram": action_histogram(result.actions, action),
             "terminations": dict(Counter(row["termination"] for row in rows)),
+            "breakdown": breakdown(result, objects),
             "episodes": rows}
 
 
@@ -134,7 +161,8 @@ def evaluate_run(run_dir: str | Path, *, episodes: int, deterministic: bool = Tr
     thresholds = {"lane": config.algo.lane.threshold,
                   "collision": config.algo.collision.threshold}
     document = result_document(result, config.action.name, thresholds=thresholds,
-                               settings=settings, source=source)
+                               settings=settings, source=source,
+                               objects=env.config.map.objects)
     atomic_write_text(Path(run_dir) / EVAL_FILE, json.dumps(document, indent=1) + "\n")
     return document
 
@@ -148,11 +176,13 @@ def evaluate_follower(task: str | Path, *, episodes: int, seed: int = DEFAULT_SE
         result = run_episodes(env, FollowerPolicy(env), episodes)
     finally:
         env.close()
+    objects = env.config.map.objects
     return result_document(
         result, "duty", thresholds=thresholds or {"lane": 0.5, "collision": 0.02},
         settings={"episodes": episodes, "seed": seed, "num_envs": num_envs,
                   "deterministic": True},
-        source={"task": str(task), "algo": "follower", "action": "duty", "obs": "state"})
+        source={"task": str(task), "algo": "follower", "action": "duty", "obs": "state"},
+        objects=objects)
 
 
 def record_run(run_dir: str | Path, *, episodes: int, seed: int | None = None,

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import torch
@@ -21,12 +22,16 @@ from crllk.episodes import EpisodeAccumulator, EpisodeStats, Summary, summarise
 
 @dataclass
 class EvaluationResult:
-    """Finished episodes in episode order, their summary and the actions taken per episode."""
+    """Finished episodes in episode order, their summary and the actions taken per episode;
+    ``directions`` the loop direction each started in (``"intended"``, ``"reverse"`` or None)
+    and ``hit_objects`` the map object each ended on (an index, or None)."""
 
     episodes: list[EpisodeStats]
     summary: Summary
     terminations: list[str | None] = field(default_factory=list)
     actions: list[np.ndarray] = field(default_factory=list)
+    directions: list[str | None] = field(default_factory=list)
+    hit_objects: list[int | None] = field(default_factory=list)
 
 
 def episode_quotas(episodes: int, num_envs: int) -> np.ndarray:
@@ -50,7 +55,8 @@ def run_episodes(env: EnvBase, policy: Callable[[TensorDictBase], TensorDictBase
     num_envs = int(env.batch_size[0])
     quotas = episode_quotas(episodes, num_envs)
     played = np.zeros(num_envs, dtype=np.int64)
-    by_env: list[list[tuple[EpisodeStats, str | None, np.ndarray]]] = [[] for _ in range(num_envs)]
+    by_env: list[list[tuple[Any, ...]]] = [[] for _ in range(num_envs)]
+    tasks = getattr(env, "tasks", [None] * num_envs)
     accumulator = EpisodeAccumulator(num_envs)
     current_actions: list[list[np.ndarray]] = [[] for _ in range(num_envs)]
     exploration = ExplorationType.DETERMINISTIC if deterministic else ExplorationType.RANDOM
@@ -64,14 +70,16 @@ def run_episodes(env: EnvBase, policy: Callable[[TensorDictBase], TensorDictBase
             for i in range(num_envs):
                 current_actions[i].append(actions[i])
             terminations = [getattr(getattr(task, "outcome", None), "termination", None)
-                            for task in getattr(env, "tasks", [None] * num_envs)]
+                            for task in tasks]
             finished = accumulator.add_step(
                 *(nxt[key].reshape(num_envs).numpy()
                   for key in ("reward", "cost_lane", "cost_collision", "done", "truncated")))
             for stats in finished:
                 i = stats.env_index
                 if played[i] < quotas[i]:
-                    by_env[i].append((stats, terminations[i], np.stack(current_actions[i])))
+                    by_env[i].append((stats, terminations[i], np.stack(current_actions[i]),
+                                      getattr(tasks[i], "start_direction", None),
+                                      getattr(tasks[i], "hit_object", None)))
                     played[i] += 1
                 current_actions[i] = []
             td = env.maybe_reset(step_mdp(stepped))  # after reading the termination reasons
@@ -79,7 +87,9 @@ def run_episodes(env: EnvBase, policy: Callable[[TensorDictBase], TensorDictBase
     stats = [entry[0] for entry in ordered]
     return EvaluationResult(episodes=stats, summary=summarise(stats),
                             terminations=[entry[1] for entry in ordered],
-                            actions=[entry[2] for entry in ordered])
+                            actions=[entry[2] for entry in ordered],
+                            directions=[entry[3] for entry in ordered],
+                            hit_objects=[entry[4] for entry in ordered])
 
 
 __all__ = ["EvaluationResult", "episode_quotas", "run_episodes"]

@@ -1,15 +1,16 @@
 """The paper's experiments, trained and evaluated from one command each.
 
     python -m crllk.experiments table1    # CRLLK-D, PPO-D, CRLLK-C, PPO-C on small_loop
-    python -m crllk.experiments maps      # CRLLK-D vs PPO-D on zigzag and obstacle_loop
+    python -m crllk.experiments maps      # the same four agents on zigzag and obstacle_loop
     python -m crllk.experiments figure1   # CRLLK-D on small_loop with alpha_1 = 0.5 and 0.75
-    python -m crllk.experiments all
+    python -m crllk.experiments sweep     # fixed-weight PPO-D over a grid of weights, every map
+    python -m crllk.experiments all       # table1, maps and figure1
 
 Every run trains in its own ``python -m crllk.train ... resume=true`` process, ``--jobs`` at a
 time (one per core), so an interrupted experiment picks up where its runs stopped and finished
 runs are not trained again. Each run is then evaluated (``python -m crllk.evaluate``; an
 ``eval.json`` of the same checkpoint and settings is reused) and the results are written to
-``results/``: a Markdown table with the paper's numbers beside ours and the JSON behind it, or
+``results/<obs>/``: a Markdown table with the paper's numbers beside ours and the JSON behind it, or
 the figures.
 """
 
@@ -52,8 +53,13 @@ PAPER_TABLE1 = {
 PAPER_J_R_PER_METRE = 30.0
 """The original reward summed speed x cos(heading) per 30 Hz step: about 30 per metre."""
 MAP_TASKS = ("zigzag", "obstacle_loop")
-MAP_AGENTS = ("CRLLK-D", "PPO-D")
+MAP_AGENTS = tuple(AGENTS)
 FIGURE_THRESHOLDS = (0.5, 0.75)
+SWEEP_TASKS = ("small_loop", "zigzag", "obstacle_loop")
+SWEEP_LANE_WEIGHTS = (0.3, 1.0, 3.0)
+"""Fixed λ_lane of the sweep's PPO-D runs (per dm of lane deviation)."""
+SWEEP_COLLISION_WEIGHTS = (1.0, 4.0, 16.0, 64.0)
+"""Fixed λ_coll of the sweep's PPO-D runs (per collision)."""
 
 
 @dataclass(frozen=True)
@@ -65,9 +71,12 @@ class RunSpec:
     seed: int
     lane_threshold: float = THRESHOLDS["lane"]
     extra: tuple[str, ...] = ()
+    tag: str = ""
+    """Added to the run's directory name (fixed weights of a sweep run)."""
 
     def directory(self, root: Path) -> Path:
-        return root / self.task / f"{self.agent}-a{self.lane_threshold:g}-seed{self.seed}"
+        return root / self.task / (f"{self.agent}{self.tag}-a{self.lane_threshold:g}"
+                                   f"-seed{self.seed}")
 
     def log(self, root: Path) -> Path:
         return self.directory(root).parent / f"{self.directory(root).name}.log"
@@ -89,13 +98,16 @@ class Settings:
     frames: int = 300_000
     seeds: tuple[int, ...] = (0, 1)
     episodes: int = 100
-    obs: str = "state"
+    obs: str = "pixels"
     jobs: int = 2
     runs_root: Path = Path("runs/experiments")
     results: Path = Path("results")
     eval_seed: int = DEFAULT_SEED
     command: str = ""
     train_overrides: tuple[str, ...] = ()
+    sweep_tasks: tuple[str, ...] = SWEEP_TASKS
+    lane_weights: tuple[float, ...] = SWEEP_LANE_WEIGHTS
+    collision_weights: tuple[float, ...] = SWEEP_COLLISION_WEIGHTS
 
 
 @dataclass
@@ -347,8 +359,8 @@ def maps(settings: Settings) -> list[Path]:
     specs = [RunSpec(agent, task, seed) for task in MAP_TASKS for agent in MAP_AGENTS
              for seed in settings.seeds]
     outcome = train_and_evaluate(specs, settings)
-    return [write_table(f"table_{task}", f"CRLLK vs PPO with discrete actions: {task}", task,
-                        MAP_AGENTS, outcome, settings, None, [("CRLLK-D", "PPO-D")])
+    return [write_table(f"table_{task}", f"CRLLK vs PPO: {task}", task, MAP_AGENTS, outcome,
+                        settings, None, [("CRLLK-D", "PPO-D"), ("CRLLK-C", "PPO-C")])
             for task in MAP_TASKS]
 
 
@@ -363,7 +375,130 @@ def figure1(settings: Settings) -> list[Path]:
     return figure1_pictures(by_threshold, settings.results, _settings_dict(settings))
 
 
-EXPERIMENTS = {"table1": table1, "maps": maps, "figure1": figure1}
+def sweep_specs(settings: Settings) -> list[RunSpec]:
+    """CRLLK-D and PPO-D at every pair of fixed weights, on every sweep map and seed."""
+    specs = []
+    for task in settings.sweep_tasks:
+        for seed in settings.seeds:
+            specs.append(RunSpec("CRLLK-D", task, seed))
+            for lane in settings.lane_weights:
+                for collision in settings.collision_weights:
+                    specs.append(RunSpec("PPO-D", task, seed, tag=f"-w{lane:g}-{collision:g}",
+                                         extra=(f"algo.lane.initial={lane}",
+                                                f"algo.collision.initial={collision}",
+                                                f"algo.collision.max_value={max(collision, 100)}")))
+    return specs
+
+
+def sweep(settings: Settings) -> list[Path]:
+    """Fixed-weight PPO-D over :data:`SWEEP_LANE_WEIGHTS` × :data:`SWEEP_COLLISION_WEIGHTS` next
+    to CRLLK-D on every map: ``<results>/<obs>/sweep.json``, ``.md`` and ``.png``."""
+    from crllk.figures import draw_sweep, save_figure  # matplotlib only when drawing
+
+    specs = sweep_specs(settings)
+    outcome = train_and_evaluate(specs, settings)
+    document = sweep_document(outcome, settings)
+    name = "sweep"
+    settings.results.mkdir(parents=True, exist_ok=True)
+    json_path = settings.results / f"{name}.json"
+    atomic_write_text(json_path, json.dumps(document, indent=1) + "\n")
+    markdown = sweep_markdown(document)
+    atomic_write_text(settings.results / f"{name}.md", markdown)
+    picture = save_figure(draw_sweep(document), settings.results / f"{name}.png")
+    print(markdown, flush=True)
+    return [json_path, settings.results / f"{name}.md", picture]
+
+
+def sweep_document(outcome: Outcome, settings: Settings) -> dict[str, Any]:
+    """Per map: every fixed-weight pair's mean metrics across seeds and whether both
+    constraints hold on every seed, CRLLK-D's, and the comparison."""
+    maps: dict[str, Any] = {}
+    for task in settings.sweep_tasks:
+        entries = []
+        for specs in _group_by_weights(outcome, task):
+            docs = [outcome.documents[s] for s in specs]
+            summary = aggregate(docs)
+            lane = collision = None
+            for item in specs[0].extra:
+                key, value = item.split("=")
+                if key == "algo.lane.initial":
+                    lane = float(value)
+                elif key == "algo.collision.initial":
+                    collision = float(value)
+            entries.append({"agent": specs[0].agent, "lane_weight": lane,
+                            "collision_weight": collision,
+                            **{m: summary[m] for m in ("J_R", "J_clane", "J_coll")},
+                            "satisfied": summary["satisfied"],
+                            "satisfied_all_seeds": all(summary["satisfied"])})
+        crllk = next(e for e in entries if e["agent"] == "CRLLK-D")
+        fixed = [e for e in entries if e["agent"] == "PPO-D"]
+        feasible = [e for e in fixed if e["satisfied_all_seeds"]]
+        best = max(feasible, key=lambda e: e["J_R"]["mean"]) if feasible else None
+        maps[task] = {"crllk": crllk, "fixed": fixed, "best_feasible_fixed": best,
+                      "feasible_pairs": len(feasible)}
+    return {"title": f"Fixed-weight PPO-D against CRLLK-D ({settings.obs})",
+            "thresholds": THRESHOLDS, "lane_weights": list(settings.lane_weights),
+            "collision_weights": list(settings.collision_weights),
+            "settings": _settings_dict(settings), "wall_s": outcome.wall_s, "maps": maps}
+
+
+def _group_by_weights(outcome: Outcome, task: str) -> list[list[RunSpec]]:
+    groups: dict[tuple[str, str], list[RunSpec]] = {}
+    for spec in outcome.documents:
+        if spec.task == task:
+            groups.setdefault((spec.agent, spec.tag), []).append(spec)
+    return list(groups.values())
+
+
+def sweep_markdown(document: dict[str, Any]) -> str:
+    """The sweep's Markdown: a table per map and what it shows, from its JSON document."""
+    thresholds, settings = document["thresholds"], document["settings"]
+    lines = [f"# {document['title']}", "",
+             f"α1 = {thresholds['lane']} dm, α2 = {thresholds['collision']}. Fixed weights: "
+             f"λ_lane ∈ {document['lane_weights']} × λ_coll ∈ {document['collision_weights']}; "
+             f"CRLLK-D learns both with its single default configuration. Mean over training "
+             f"seeds {', '.join(map(str, settings['seeds']))}; 'holds' means both constraints "
+             f"hold on every seed.", "",
+             f"- Observation: `{settings['obs']}`; budget {settings['frames']:,} frames per run; "
+             f"{settings['episodes']} deterministic evaluation episodes per run from spawn "
+             f"seed {settings['eval_seed']}.",
+             f"- Command: `{settings['command']}` ({document['wall_s'] / 60:.1f} min wall for "
+             "the invocation that finished it).",
+             f"- Machine: {settings['machine']}.", ""]
+    for task, entry in document["maps"].items():
+        lines += [f"## {task}", "", "| agent | λ_lane | λ_coll | J_clane (dm) | J_coll | J_R (m) "
+                  "| holds |", "| --- | --- | --- | --- | --- | --- | --- |"]
+        for e in [entry["crllk"], *entry["fixed"]]:
+            weights = ("learned", "learned") if e["agent"] == "CRLLK-D" else (
+                f"{e['lane_weight']:g}", f"{e['collision_weight']:g}")
+            lines.append(f"| {e['agent']} | {weights[0]} | {weights[1]} | "
+                         f"{e['J_clane']['mean']:.3f} | {e['J_coll']['mean']:.3f} | "
+                         f"{e['J_R']['mean']:.2f} | "
+                         f"{'yes' if e['satisfied_all_seeds'] else 'no'} |")
+        lines += ["", sweep_verdict(task, entry), ""]
+    return "\n".join(lines)
+
+
+def sweep_verdict(task: str, entry: dict[str, Any]) -> str:
+    """What the sweep shows on one map, in one sentence."""
+    crllk, best = entry["crllk"], entry["best_feasible_fixed"]
+    holds = "meets both constraints" if crllk["satisfied_all_seeds"] else \
+        "does not meet both constraints on every seed"
+    text = (f"On {task}, {entry['feasible_pairs']} of {len(entry['fixed'])} fixed-weight pairs "
+            f"meet both constraints on every seed; CRLLK-D {holds} with J_R "
+            f"{crllk['J_R']['mean']:.2f} m")
+    if best is None:
+        return text + "."
+    difference = crllk["J_R"]["mean"] - best["J_R"]["mean"]
+    relation = "farther than" if difference > 0 else "less far than"
+    return (text + f", {abs(difference):.2f} m {relation} the best of them (λ_lane "
+            f"{best['lane_weight']:g}, λ_coll {best['collision_weight']:g}: "
+            f"{best['J_R']['mean']:.2f} m).")
+
+
+EXPERIMENTS = {"table1": table1, "maps": maps, "figure1": figure1, "sweep": sweep}
+ALL = ("table1", "maps", "figure1")
+"""What ``all`` runs (the sweep is asked for by name)."""
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -378,7 +513,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--jobs", type=int, default=Settings.jobs, help="runs at a time")
     parser.add_argument("--runs-root", type=Path, default=Settings.runs_root,
                         help="runs go to <runs-root>/<obs>/<task>/<agent>-a<alpha_1>-seed<seed>")
-    parser.add_argument("--results", type=Path, default=Settings.results)
+    parser.add_argument("--results", type=Path, default=Settings.results,
+                        help="tables and figures go to <results>/<obs>/")
+    parser.add_argument("--sweep-tasks", nargs="+", default=list(SWEEP_TASKS),
+                        help="sweep: the maps")
+    parser.add_argument("--lane-weights", type=float, nargs="+",
+                        default=list(SWEEP_LANE_WEIGHTS), help="sweep: fixed lambda_lane values")
+    parser.add_argument("--collision-weights", type=float, nargs="+",
+                        default=list(SWEEP_COLLISION_WEIGHTS),
+                        help="sweep: fixed lambda_coll values")
     parser.add_argument("--set", nargs="*", default=[], metavar="KEY=VALUE",
                         help="extra trainer overrides for every run, e.g. ppo.epochs=5")
     args = parser.parse_args(argv)
@@ -388,9 +531,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     command = "python -m crllk.experiments " + " ".join(sys.argv[1:] if argv is None else argv)
     settings = Settings(frames=args.frames, seeds=tuple(args.seeds), episodes=args.episodes,
                         obs=args.obs, jobs=args.jobs, runs_root=args.runs_root / args.obs,
-                        results=args.results, command=command,
-                        train_overrides=tuple(args.set))
-    names = list(EXPERIMENTS) if args.experiment == "all" else [args.experiment]
+                        results=args.results / args.obs, command=command,
+                        train_overrides=tuple(args.set), sweep_tasks=tuple(args.sweep_tasks),
+                        lane_weights=tuple(args.lane_weights),
+                        collision_weights=tuple(args.collision_weights))
+    names = list(ALL) if args.experiment == "all" else [args.experiment]
     try:
         for name in names:
             EXPERIMENTS[name](settings)

@@ -185,3 +185,34 @@ def figure1_pictures(by_threshold: Mapping[float, Sequence[Path]], results: Path
 __all__ = ["draw_figure1_actions", "draw_figure1_curves", "figure1_data", "figure1_pictures",
            "moving_average", "plot_action_distribution", "policy_trajectory", "save_figure",
            "seed_band"]
+
+
+def draw_sweep(document: Mapping[str, Any]) -> Any:
+    """One panel per map: J_R against J_clane of every fixed-weight pair (filled where both
+    constraints hold on every seed, labelled λ_lane/λ_coll) and of CRLLK-D (a star); the
+    dashed line is α1."""
+    maps = document["maps"]
+    figure, axes = plt.subplots(1, len(maps), figsize=(4.6 * len(maps), 4.0), squeeze=False)
+    alpha = document["thresholds"]["lane"]
+    for ax, (task, entry) in zip(axes[0], maps.items(), strict=True):
+        for e in entry["fixed"]:
+            x, y = e["J_clane"]["mean"], e["J_R"]["mean"]
+            holds = e["satisfied_all_seeds"]
+            ax.scatter([x], [y], s=36, marker="o", color="tab:blue",
+                       facecolors="tab:blue" if holds else "none")
+            ax.annotate(f"{e['lane_weight']:g}/{e['collision_weight']:g}", (x, y), fontsize=7,
+                        xytext=(3, 3), textcoords="offset points")
+        c = entry["crllk"]
+        ax.scatter([c["J_clane"]["mean"]], [c["J_R"]["mean"]], s=140, marker="*",
+                   color="tab:red" if c["satisfied_all_seeds"] else "none",
+                   edgecolors="tab:red", label="CRLLK-D (learned λ)")
+        ax.axvline(alpha, linestyle="--", color="grey", linewidth=1)
+        ax.set_title(f"{task}: {entry['feasible_pairs']} of {len(entry['fixed'])} pairs hold")
+        ax.set_xlabel("J_clane (dm)")
+        ax.set_ylabel("J_R (m per episode)")
+    axes[0][0].scatter([], [], s=36, color="tab:blue", label="PPO-D, both constraints hold")
+    axes[0][0].scatter([], [], s=36, facecolors="none", edgecolors="tab:blue",
+                       label="PPO-D, a constraint fails (λ_lane/λ_coll)")
+    axes[0][0].legend(fontsize=7, loc="lower right")
+    figure.tight_layout()
+    return figure

@@ -9,6 +9,7 @@ touches an obstacle or the physics diverges; the 512-step time limit is a trunca
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -19,22 +20,29 @@ from dm_control.rl import control
 from dm_control.suite import base
 from dm_env import specs
 
-from crllk.actions import clip_duty, discrete_duty, velocity_steering_duty
+from crllk.actions import clip_duty, discrete_duty, drive_turn_duty, velocity_steering_duty
 from crllk.maps import DuckietownMap, LanePose, MapObject
+from crllk.maps.obstacles import ObstacleIndex, footprint_points
+from crllk.sim import constants as C
 from crllk.sim.physics import Physics, check_points
 from crllk.task_config import TaskConfig, load_task_config
 
 OBSERVATIONS = ("pixels", "state")
-ACTIONS = ("discrete", "continuous", "duty")
-"""Action types: 3 discrete duty pairs, (velocity, steering) through the Duckietown inverse
-kinematics, or raw wheel duty cycles (left, right) in [-1, 1]."""
+ACTIONS = ("discrete", "continuous", "duckietown", "duty")
+"""Action types (:mod:`crllk.actions`): 3 discrete duty pairs; (velocity, steering) in
+[-1, 1]^2 as a forward drive and a turn; (velocity, steering) through the Duckietown inverse
+kinematics, as the original; raw wheel duty cycles (left, right) in [-1, 1]."""
 
 _CURVATURE_LOOKAHEAD = (0.15, 0.3, 0.6)
 """Distances ahead (m) at which the state observation reports lane curvature."""
-_OBSTACLE_RANGE = 1.5
-"""Obstacles farther ahead than this (m) are reported at this distance."""
-_OBSTACLE_CORRIDOR = 0.3
-"""Half-width of the corridor ahead searched for obstacles (m)."""
+OBSTACLE_RANGE = 1.5
+"""Obstacles farther ahead along the lane than this (m) are not reported; an empty slot reads
+(OBSTACLE_RANGE, 0, 0)."""
+OBSTACLES_REPORTED = 2
+"""Obstacles on the road ahead reported in the state features, nearest first."""
+_BLOCKING_HALF_WIDTH = 0.1
+"""An obstacle whose footprint comes this close (m) to a lane's centre line blocks the lane
+(the robot is 0.075 m half-wide): encounter spawns start in front of such obstacles."""
 _SPAWN_ATTEMPTS = 1000
 _METRES_TO_DECIMETRES = 10.0
 
@@ -56,7 +64,9 @@ def state_feature_names(config: TaskConfig) -> list[str]:
     names = ["lateral_offset", "heading_error_sin", "heading_error_cos", "forward_speed",
              "yaw_rate"]
     names += [f"curvature_{d:g}m" for d in _CURVATURE_LOOKAHEAD]
-    names += ["obstacle_distance", "obstacle_lateral"]
+    for k in range(1, OBSTACLES_REPORTED + 1):
+        names += [f"obstacle_distance_{k}", f"obstacle_lateral_left_{k}",
+                  f"obstacle_lateral_right_{k}"]
     for k in range(_command_history_length(config)):
         names += [f"duty_left_t-{k}", f"duty_right_t-{k}"]
     return names
@@ -85,6 +95,19 @@ class LaneKeeping(base.Task):
         """Duty cycles (left, right) commanded, newest first."""
         self._outcome: StepOutcome | None = None
         self._previous_pose: tuple[float, float, float] | None = None
+        self.obstacles = obstacle_index(self.map)
+        """The map's obstacles in the lane frame (state features and encounter spawns)."""
+        self.encounter = False
+        """Whether this episode started in front of an obstacle (``spawn.encounters``)."""
+        self.start_direction: str | None = None
+        """The episode's start lane: ``"intended"`` or ``"reverse"`` loop direction of the map
+        (None where the map is not one loop)."""
+        self.hit_object: int | None = None
+        """Index in the map's objects of the obstacle the episode ended on, if any."""
+        self._blocking = [(lane, o) for lane in self.map.lanes
+                          for o in self.obstacles.on_lane(lane)
+                          if o.lateral_left < _BLOCKING_HALF_WIDTH
+                          and o.lateral_right > -_BLOCKING_HALF_WIDTH]
 
     # ----- specs ------------------------------------------------------------------------
     def action_spec(self, physics: Physics):
@@ -112,17 +135,27 @@ class LaneKeeping(base.Task):
         self._previous_pose = (x, y, yaw)
         pose = self.map.lane_pose(x, y, yaw)
         self._outcome = StepOutcome(0.0, pose, self._lane_cost(pose), 0.0, None)
+        self.start_direction = self.map.direction_of(pose.lane)
+        self.hit_object = None
         super().initialize_episode(physics)
 
     def _spawn_pose(self) -> tuple[float, float, float]:
+        """A random start: with probability ``spawn.encounters`` (when some obstacle blocks a
+        lane) in front of a blocking obstacle, otherwise on a random road tile and lane."""
         spawn = self.config.spawn
+        self.encounter = bool(self._blocking) and spawn.encounters > 0 and \
+            self.random.uniform() < spawn.encounters
         tiles = self.map.road_tiles
         for _ in range(_SPAWN_ATTEMPTS):
-            tile = tiles[self.random.randint(len(tiles))]
-            lanes = self.map.tile_lanes(tile.column, tile.row)
-            lane = lanes[self.random.randint(len(lanes))]
-            along = self.random.uniform(0.0, lane.length)
-            lateral = self.random.uniform(*spawn.lateral_offset)
+            if self.encounter:
+                lane, along = self._encounter_start()
+            else:
+                tile = tiles[self.random.randint(len(tiles))]
+                lanes = self.map.tile_lanes(tile.column, tile.row)
+                lane = lanes[self.random.randint(len(lanes))]
+                along = self.random.uniform(0.0, lane.length)
+            offsets = spawn.encounter_lateral_offset if self.encounter else spawn.lateral_offset
+            lateral = self.random.uniform(*offsets)
             x, y, heading = lane.point_at(along, lateral)
             yaw = heading + self.random.uniform(*spawn.heading_error)
             if self._spawn_is_clear(x, y, yaw):
@@ -130,9 +163,23 @@ class LaneKeeping(base.Task):
         raise RuntimeError(f"{self.config.source}: spawn: no clear start pose found in "
                            f"{_SPAWN_ATTEMPTS} tries; lower spawn.obstacle_clearance")
 
+    def _encounter_start(self) -> tuple[Any, float]:
+        """(lane, along) a random ``spawn.encounter_distance`` before a blocking obstacle."""
+        lane, obstacle = self._blocking[self.random.randint(len(self._blocking))]
+        back = obstacle.along_start - self.random.uniform(*self.config.spawn.encounter_distance)
+        while back < 0.0:
+            previous = self.obstacles.previous_lane(lane)
+            if previous is None:
+                return lane, 0.0
+            lane = previous
+            back += lane.length
+        return lane, back
+
     def _spawn_is_clear(self, x: float, y: float, yaw: float) -> bool:
+        """On the road, and the footprint at least ``spawn.obstacle_clearance`` from every
+        obstacle's footprint."""
         clearance = self.config.spawn.obstacle_clearance
-        if any(_distance_to_footprint(obj, x, y) < clearance for obj in self.map.objects):
+        if any(_footprint_gap(obj, x, y, yaw) < clearance for obj in self.map.objects):
             return False
         return self.map.all_road(check_points(x, y, yaw))
 
@@ -151,6 +198,8 @@ class LaneKeeping(base.Task):
             return discrete_duty(action if type(action) is int else np.asarray(action).item())
         pair = np.asarray(action, dtype=np.float64).reshape(2).tolist()
         if self.action_type == "continuous":
+            return drive_turn_duty(*pair)
+        if self.action_type == "duckietown":
             return velocity_steering_duty(*pair)
         return clip_duty(*pair)
 
@@ -167,6 +216,8 @@ class LaneKeeping(base.Task):
             termination = "off_road"
         elif physics.touches_obstacle():
             termination = "collision"
+            self.hit_object = min(range(len(self.map.objects)), key=lambda k: _footprint_gap(
+                self.map.objects[k], x, y, yaw))
         off_road = termination == "off_road" or not pose.on_road
         cost_lane = self.config.off_road_lane_cost if off_road else self._lane_cost(pose)
         cost_collision = 1.0 if termination in ("off_road", "collision") else 0.0
@@ -188,6 +239,8 @@ class LaneKeeping(base.Task):
         plain Python values (see :meth:`load_episode_state`)."""
         name, keys, position, has_gauss, cached_gaussian = self.random.get_state(legacy=True)
         return {"history": [list(duty) for duty in self._history],
+                "encounter": self.encounter,
+                "start_direction": self.start_direction, "hit_object": self.hit_object,
                 "previous_pose": self._previous_pose,
                 "outcome": None if self._outcome is None else self._outcome_state(),
                 "random": (name, keys.tolist(), position, has_gauss, cached_gaussian)}
@@ -195,6 +248,9 @@ class LaneKeeping(base.Task):
     def load_episode_state(self, state: dict[str, Any]) -> None:
         """Restore an :meth:`episode_state`."""
         self._history = [(left, right) for left, right in state["history"]]
+        self.encounter = bool(state.get("encounter", False))
+        self.start_direction = state.get("start_direction")
+        self.hit_object = state.get("hit_object")
         previous = state["previous_pose"]
         self._previous_pose = None if previous is None else tuple(previous)
         outcome = state["outcome"]
@@ -238,6 +294,20 @@ class LaneKeeping(base.Task):
             return physics.render_camera(cam.height, cam.width, cam.supersample)
         return self.state_feature_list(physics)
 
+    def obstacle_features(self, pose: LanePose) -> list[float]:
+        """For each of the :data:`OBSTACLES_REPORTED` nearest obstacles on the road ahead
+        along the lane: distance (m) to its footprint, and the lateral offsets of its left and
+        right edges from the lane centre (m, positive right); (OBSTACLE_RANGE, 0, 0) when there
+        is none."""
+        found = self.obstacles.ahead(pose, OBSTACLES_REPORTED, OBSTACLE_RANGE)
+        out: list[float] = []
+        for k in range(OBSTACLES_REPORTED):
+            if k < len(found):
+                out += [found[k].distance, found[k].lateral_left, found[k].lateral_right]
+            else:
+                out += [OBSTACLE_RANGE, 0.0, 0.0]
+        return out
+
     def state_features(self, physics: Physics) -> np.ndarray:
         """The ``state`` observation; see :func:`state_feature_names`."""
         return np.array(self.state_feature_list(physics))
@@ -245,35 +315,41 @@ class LaneKeeping(base.Task):
     def state_feature_list(self, physics: Physics) -> list[float]:
         """:meth:`state_features` as a list of floats."""
         pose = self._outcome.lane_pose
-        x, y, yaw = physics.pose()
+        _x, _y, yaw = physics.pose()
         return [pose.lateral, math.sin(pose.heading_error), math.cos(pose.heading_error),
                 physics.forward_speed(yaw), physics.yaw_rate(),
                 *self.map.curvature_ahead(pose, _CURVATURE_LOOKAHEAD),
-                *_nearest_obstacle_ahead(self.map.objects, x, y, yaw),
+                *self.obstacle_features(pose),
                 *(value for duty in self._history for value in duty)]
 
 
-def _distance_to_footprint(obj: MapObject, x: float, y: float) -> float:
-    """Distance (m) from a point to an object's footprint rectangle (0 inside)."""
-    c, s = math.cos(obj.yaw), math.sin(obj.yaw)
-    dx, dy = x - obj.x, y - obj.y
-    u, v = c * dx + s * dy, -s * dx + c * dy
-    return math.hypot(max(abs(u) - obj.length / 2, 0.0), max(abs(v) - obj.width / 2, 0.0))
+@functools.lru_cache(maxsize=16)
+def obstacle_index(dmap: DuckietownMap) -> ObstacleIndex:
+    """The obstacle index of a map, built once per map object."""
+    return ObstacleIndex(dmap)
 
 
-def _nearest_obstacle_ahead(objects, x: float, y: float, yaw: float) -> list[float]:
-    """(distance, lateral) in m of the nearest obstacle in a corridor ahead of the robot."""
-    best = [_OBSTACLE_RANGE, 0.0]
+def _point_to_rectangle(px: float, py: float, cx: float, cy: float, yaw: float,
+                        length: float, width: float) -> float:
+    """Distance (m) from a point to a rectangle centred at (cx, cy) (0 inside)."""
     c, s = math.cos(yaw), math.sin(yaw)
-    for obj in objects:
-        dx, dy = obj.x - x, obj.y - y
-        ahead, left = c * dx + s * dy, -s * dx + c * dy
-        reach = max(obj.length, obj.width) / 2
-        if ahead + reach > 0 and abs(left) < _OBSTACLE_CORRIDOR + reach:
-            distance = max(ahead - reach, 0.0)
-            if distance < best[0]:
-                best = [distance, -left]
-    return best
+    dx, dy = px - cx, py - cy
+    u, v = c * dx + s * dy, -s * dx + c * dy
+    return math.hypot(max(abs(u) - length / 2, 0.0), max(abs(v) - width / 2, 0.0))
+
+
+def _footprint_gap(obj: MapObject, x: float, y: float, yaw: float) -> float:
+    """Distance (m) between the robot's footprint at axle pose (x, y, yaw) and an object's
+    footprint, from points on each outline (0 when they overlap)."""
+    centre_x = x - C.FOOTPRINT_CENTRE_BEHIND_AXLE * math.cos(yaw)
+    centre_y = y - C.FOOTPRINT_CENTRE_BEHIND_AXLE * math.sin(yaw)
+    robot = MapObject("robot", centre_x, centre_y, yaw, C.FOOTPRINT_LENGTH, C.FOOTPRINT_WIDTH,
+                      0.0)
+    to_object = min(_point_to_rectangle(px, py, obj.x, obj.y, obj.yaw, obj.length, obj.width)
+                    for px, py in footprint_points(robot))
+    to_robot = min(_point_to_rectangle(px, py, centre_x, centre_y, yaw, robot.length,
+                                       robot.width) for px, py in footprint_points(obj))
+    return min(to_object, to_robot)
 
 
 def load(task: str | Path, *, observation: str = "pixels", action: str = "discrete",

@@ -29,6 +29,7 @@ from torchrl.objectives import LossModule
 from torchrl.objectives.value import GAE
 
 _ADVANTAGE_STD_EPS = 1e-6  # floor of the advantage std when standardising (advantage units)
+_TEACHER_MARGIN = 1e-3  # continuous teacher actions are clamped this far inside [-1, 1]
 
 
 def cost_reward_key(name: str) -> str:
@@ -55,6 +56,11 @@ class LagrangianPPOLoss(LossModule):
         loss_critic      = c_v · mean((V_r(s) − G_r)²)
         loss_cost_critic = c_v · Σ_i mean((V_ci(s) − G_ci)²)
         loss_entropy     = −c_H · mean(H[π_θ(·|s)])
+        loss_imitation   = −c_I · mean(log π_θ(a_teacher|s))
+
+The imitation term pulls the policy towards a teacher's action ``teacher_action`` recorded for
+each state (:mod:`crllk.teacher`); its weight c_I (``imitation_coeff``, settable between
+updates like the multipliers) is 0 by default, and then the term is 0 and needs no teacher key.
 
     The sum of the ``loss_*`` entries is the quantity to minimise. Diagnostics (detached):
     ``entropy``, ``kl_approx`` = mean((ρ − 1) − log ρ) (the non-negative "k3" estimator, where
@@ -88,10 +94,12 @@ class LagrangianPPOLoss(LossModule):
         value: NestedKey = "state_value"
         sample_log_prob: NestedKey = "action_log_prob"
         action: NestedKey = "action"
+        teacher_action: NestedKey = "teacher_action"
 
     default_keys = _AcceptedKeys
     tensor_keys: _AcceptedKeys
-    _schedulable_buffers = frozenset({"clip_epsilon", "entropy_coeff", "critic_coeff"})
+    _schedulable_buffers = frozenset({"clip_epsilon", "entropy_coeff", "critic_coeff",
+                                      "imitation_coeff"})
 
     actor_network: ProbabilisticActor
     critic_network: TensorDictModule
@@ -120,6 +128,7 @@ class LagrangianPPOLoss(LossModule):
         self.register_coeff_buffer("clip_epsilon", clip_epsilon)
         self.register_coeff_buffer("entropy_coeff", entropy_coeff)
         self.register_coeff_buffer("critic_coeff", critic_coeff)
+        self.register_coeff_buffer("imitation_coeff", 0.0)
         self.normalize_advantage = normalize_advantage
         self.register_buffer("lagrange", torch.zeros(len(self.cost_names)))
         if lagrange is not None:
@@ -191,7 +200,8 @@ class LagrangianPPOLoss(LossModule):
 
     @property
     def out_keys(self) -> list[str]:
-        names = ["loss_objective", "loss_critic", "loss_cost_critic", "loss_entropy"]
+        names = ["loss_objective", "loss_critic", "loss_cost_critic", "loss_entropy",
+                 "loss_imitation"]
         names += ["entropy", "kl_approx", "clip_fraction", "explained_variance"]
         return names + [f"explained_variance_{name}" for name in self.cost_names]
 
@@ -255,6 +265,7 @@ class LagrangianPPOLoss(LossModule):
             "loss_critic": loss_critic,
             "loss_cost_critic": torch.zeros_like(loss_critic),
             "loss_entropy": -self.entropy_coeff * entropy.mean(),
+            "loss_imitation": self._imitation_loss(td, dist),
             "entropy": entropy.detach().mean(),
             "kl_approx": (log_ratio.exp() - 1.0 - log_ratio).detach().mean(),
             "clip_fraction": clip_fraction,
@@ -266,6 +277,22 @@ class LagrangianPPOLoss(LossModule):
             out["loss_cost_critic"] = out["loss_cost_critic"] + loss
             out[f"explained_variance_{name}"] = explained
         return TensorDict(out, batch_size=[])
+
+    def set_imitation_coeff(self, value: float) -> None:
+        """Sets c_I, the weight of the imitation term (0 switches it off)."""
+        if not (value >= 0.0 and math.isfinite(value)):
+            raise ValueError(f"imitation_coeff must be finite and >= 0, got {value}")
+        self.imitation_coeff.fill_(value)
+
+    def _imitation_loss(self, td: TensorDictBase, dist: Distribution) -> torch.Tensor:
+        """−c_I · mean(log π_θ(a_teacher|s)); 0 when c_I is 0. Continuous teacher actions are
+        kept just inside the box, where a tanh-squashed policy's density is finite."""
+        if float(self.imitation_coeff) == 0.0:
+            return torch.zeros((), dtype=self.imitation_coeff.dtype)
+        target = _get(td, self.tensor_keys.teacher_action)
+        if target.is_floating_point():
+            target = target.clamp(-1.0 + _TEACHER_MARGIN, 1.0 - _TEACHER_MARGIN)
+        return -self.imitation_coeff * dist.log_prob(target).mean()
 
     def _log_ratio(self, td: TensorDictBase) -> tuple[torch.Tensor, Distribution]:
         """log ρ = log π_θ(a|s) − log π_old(a|s), shape [*B, 1], and the current π_θ."""

@@ -209,8 +209,9 @@ def make_actor(observation: str, observation_shape: Sequence[int], action: str,
         module = TensorDictModule(net, in_keys=[observation], out_keys=["logits"])
         return ProbabilisticActor(module, in_keys=["logits"], spec=action_spec,
                                   distribution_class=Categorical, return_log_prob=True)
-    if action != "continuous":
-        raise ValueError(f"action must be 'discrete' or 'continuous', got {action!r}")
+    if action not in ("continuous", "duckietown"):
+        raise ValueError("action must be 'discrete', 'continuous' or 'duckietown', "
+                         f"got {action!r}")
     action_dim = int(action_spec.shape[-1])
     net = GaussianParams(nn.Sequential(encoder, _head(width, action_dim, gain=0.01)),
                          action_dim, config.initial_log_std)

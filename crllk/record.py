@@ -106,6 +106,7 @@ ENTITY_PATHS = (*MAP_ENTITY_PATHS, FOOTPRINT, CAMERA, *STEP_ENTITY_PATHS, EVENTS
 """Every entity path a recording holds, whatever the action type and multipliers."""
 ACTION_ENTITY_PATHS = {"discrete": ("action/index",),
                        "continuous": ("action/velocity", "action/steering"),
+                       "duckietown": ("action/velocity", "action/steering"),
                        "duty": ("action/duty_left", "action/duty_right")}
 """The action's scalar paths per action type (discrete: 0 left, 1 right, 2 straight)."""
 

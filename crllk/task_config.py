@@ -30,7 +30,15 @@ class SpawnConfig:
     heading_error: tuple[float, float] = (-0.25, 0.25)
     """Range of the start's heading error (rad)."""
     obstacle_clearance: float = 0.25
-    """Least distance from the robot's axle centre to any obstacle's footprint (m)."""
+    """Least distance between the robot's footprint and any obstacle's footprint (m)."""
+    encounters: float = 0.0
+    """Probability that an episode starts in front of an obstacle that blocks its lane
+    (trainers raise it to meet obstacles more often; evaluation keeps the task's own)."""
+    encounter_distance: tuple[float, float] = (0.3, 1.2)
+    """Range of the distance (m) along the lane from such a start to the obstacle."""
+    encounter_lateral_offset: tuple[float, float] = (-0.25, 0.04)
+    """Range of such a start's offset from the lane centre (m, positive right): wider than
+    ``lateral_offset``, so that some starts are already beside the obstacle's left side."""
 
 
 @dataclass(frozen=True)
@@ -130,6 +138,12 @@ def parse_task(settings: Mapping[str, Any], *, name: str, dmap: DuckietownMap,
         raise ConfigError(source, "horizon", f"must be positive, got {config.horizon}")
     if config.control_rate <= 0:
         raise ConfigError(source, "control_rate", f"must be positive, got {config.control_rate}")
+    if config.spawn.encounters > 1:
+        raise ConfigError(source, "spawn.encounters",
+                          f"is a probability and must lie in [0, 1], got {config.spawn.encounters}")
+    if config.spawn.encounter_distance[0] < 0:
+        raise ConfigError(source, "spawn.encounter_distance",
+                          f"must be non-negative, got {list(config.spawn.encounter_distance)}")
     substeps = _PHYSICS_RATE / config.control_rate
     if abs(substeps - round(substeps)) > 1e-9:
         raise ConfigError(source, "control_rate",

@@ -58,7 +58,8 @@ RESUME_KEEPS = ("total_frames", "progress", "threads", "checkpoint_every", "reco
 """Settings a resumed run takes from the command line; all others come from its config.yaml."""
 SOURCE_RUN = "run"
 """How errors about the run directory name their source."""
-LOSS_KEYS = ("loss_objective", "loss_critic", "loss_cost_critic", "loss_entropy", "entropy",
+LOSS_KEYS = ("loss_objective", "loss_critic", "loss_cost_critic", "loss_entropy",
+             "loss_imitation", "entropy",
              "kl_approx", "clip_fraction", "explained_variance", "explained_variance_lane",
              "explained_variance_collision")
 
@@ -75,10 +76,18 @@ class Learner:
     optimizer: torch.optim.Optimizer
 
 
-def build_env(config: TrainConfig, *, num_envs: int, seed: int) -> BatchedLaneKeepingEnv:
+def build_env(config: TrainConfig, *, num_envs: int, seed: int,
+              training: bool = False) -> BatchedLaneKeepingEnv:
+    """The run's environment; the ``training`` one starts ``encounters`` of its episodes in
+    front of an obstacle, the others keep the task's own spawns."""
+    overrides = config.task_overrides()
+    if training and config.encounters > 0:
+        spawn = {**overrides.get("spawn", {}), "encounters": config.encounters}
+        overrides = {**overrides, "spawn": spawn}
     return make_env(config.task_source(), num_envs=num_envs, observation=config.obs.name,
-                    action=config.action.name, seed=seed, overrides=config.task_overrides(),
-                    privileged_state=config.model.critic_input == "state")
+                    action=config.action.name, seed=seed, overrides=overrides,
+                    privileged_state=config.model.critic_input == "state",
+                    teacher=training and (config.teacher.coeff > 0 or config.teacher.final > 0))
 
 
 def build_learner(config: TrainConfig, env: BatchedLaneKeepingEnv) -> Learner:
@@ -132,7 +141,7 @@ def build_run(config: TrainConfig) -> tuple[BatchedLaneKeepingEnv, Learner,
     torch.set_num_threads(config.threads)
     torch.manual_seed(config.seed)
     generator = torch.Generator().manual_seed(config.seed)
-    env = build_env(config, num_envs=config.num_envs, seed=config.seed)
+    env = build_env(config, num_envs=config.num_envs, seed=config.seed, training=True)
     return env, build_learner(config, env), build_multipliers(config), generator
 
 
@@ -179,7 +188,7 @@ def ppo_update(learner: Learner, batch: TensorDictBase, config: TrainConfig,
         for start in range(0, size, config.ppo.minibatch_size):
             out = learner.loss(flat[order[start:start + config.ppo.minibatch_size]])
             total = out["loss_objective"] + out["loss_critic"] + out["loss_cost_critic"] + \
-                out["loss_entropy"]
+                out["loss_entropy"] + out["loss_imitation"]
             learner.optimizer.zero_grad(set_to_none=True)
             total.backward()
             for group in groups:
@@ -205,10 +214,22 @@ def action_columns(batch: TensorDictBase, action: str) -> dict[str, float]:
             "action_steering_std": float(flat[:, 1].std())}
 
 
+def imitation_coeff(config: TrainConfig, frames: int) -> float:
+    """Weight of the imitation term after ``frames``: ``teacher.coeff`` at first, linearly
+    to ``teacher.final`` at ``teacher.frames``, then ``teacher.final``."""
+    teacher = config.teacher
+    if teacher.frames == 0:
+        return teacher.final
+    fraction = min(frames / teacher.frames, 1.0)
+    return teacher.coeff + fraction * (teacher.final - teacher.coeff)
+
+
 def update_multipliers(multipliers: dict[str, Multiplier],
                        episodes: Sequence[EpisodeStats]) -> None:
-    """Dual ascent from the finished episodes: Ĵ_clane is an episode's mean lane cost (dm),
-    Ĵ_coll its number of collisions."""
+    """Dual ascent from the finished episodes of the task's own spawn distribution (episodes
+    started in front of an obstacle are left out): Ĵ_clane is an episode's mean lane cost
+    (dm), Ĵ_coll its number of collisions."""
+    episodes = [e for e in episodes if not e.encounter]
     multipliers["lane"].update([e.lane_cost for e in episodes])
     multipliers["collision"].update([e.collisions for e in episodes])
 
@@ -248,7 +269,8 @@ def _format(value: Any) -> Any:
 
 def metric_columns(action: str) -> list[str]:
     columns = ["iteration", "frames", "time_s", "frames_per_s", "episodes", "J_R", "J_clane",
-               "J_coll", "episode_length", "lambda_lane", "lambda_collision", *LOSS_KEYS]
+               "J_coll", "episode_length", "encounter_episodes", "J_coll_encounter",
+               "lambda_lane", "lambda_collision", *LOSS_KEYS]
     if action == "discrete":
         return columns + [f"action_{n}" for n in DISCRETE_ACTION_NAMES]
     return [*columns, "action_velocity_mean", "action_steering_mean", "action_steering_std"]
@@ -301,17 +323,21 @@ def train(config: TrainConfig) -> Path:
         finished = episodes.add_batch(batch)
         update_multipliers(multipliers, finished)
         learner.loss.set_multipliers([multipliers[c].value for c in COSTS])
+        learner.loss.set_imitation_coeff(imitation_coeff(config, frames))
+        env.teacher_active = imitation_coeff(config, frames + batch.numel()) > 0
         shape_signals(batch, config, env.config.off_road_lane_cost)
         losses = ppo_update(learner, batch, config, generator)
         iteration += 1
         frames += batch.numel()
 
-        summary = summarise(finished)
+        summary = summarise([e for e in finished if not e.encounter])
+        encounters = summarise([e for e in finished if e.encounter])
         row = {"iteration": iteration, "frames": frames,
                "time_s": time.perf_counter() - started,
                "frames_per_s": batch.numel() / (time.perf_counter() - iteration_start),
                "episodes": summary.episodes, "J_R": summary.J_R, "J_clane": summary.J_clane,
                "J_coll": summary.J_coll, "episode_length": summary.length,
+               "encounter_episodes": encounters.episodes, "J_coll_encounter": encounters.J_coll,
                "lambda_lane": multipliers["lane"].value,
                "lambda_collision": multipliers["collision"].value,
                **losses, **action_columns(batch, config.action.name)}
@@ -319,7 +345,8 @@ def train(config: TrainConfig) -> Path:
         bar.update(batch.numel())
         bar.set_postfix_str(progress_text(row), refresh=False)
 
-        if config.eval.every and iteration % config.eval.every == 0:
+        if config.eval.every and (iteration % config.eval.every == 0
+                                  or frames >= config.total_frames):
             if eval_env is None:
                 eval_env = build_env(config, num_envs=config.eval.num_envs, seed=config.eval.seed)
             evaluations.append(evaluate(config, eval_env, learner, iteration, frames,

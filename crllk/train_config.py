@@ -80,10 +80,17 @@ class ModelSchema:
 
 
 @dataclass
+class TeacherConfig:
+    coeff: float = 0.0
+    frames: int = 0
+    final: float = 0.0
+
+
+@dataclass
 class EvalConfig:
-    every: int = 20
-    episodes: int = 8
-    num_envs: int = 8
+    every: int = 100
+    episodes: int = 100
+    num_envs: int = 10
     seed: int = 1_000_000
 
 
@@ -102,6 +109,7 @@ class TrainConfig:
     rollout_steps: int = 64
     reward_scale: float = 30.0
     absorbing_off_road: bool = False
+    encounters: float = 0.0
     threads: int = 1
     checkpoint_every: int = 10
     progress: bool = True
@@ -110,6 +118,7 @@ class TrainConfig:
     ppo: PPOConfig = field(default_factory=PPOConfig)
     model: ModelSchema = field(default_factory=ModelSchema)
     eval: EvalConfig = field(default_factory=EvalConfig)
+    teacher: TeacherConfig = field(default_factory=TeacherConfig)
 
     @property
     def task_name(self) -> str:
@@ -142,7 +151,7 @@ _CHOICES = {
     "algo.name": ("crllk", "ppo"),
     "algo.multiplier": ("dual", "pid"),
     "algo.schedule": ("episode", "batch"),
-    "action.name": ("discrete", "continuous"),
+    "action.name": ("discrete", "continuous", "duckietown"),
     "obs.name": ("state", "pixels"),
     "model.encoder": ("fast", "original"),
     "model.critic_input": ("observation", "state"),
@@ -152,12 +161,13 @@ _POSITIVE = ("total_frames", "num_envs", "rollout_steps", "threads", "checkpoint
              "ppo.epochs", "ppo.minibatch_size", "ppo.lr", "ppo.max_grad_norm",
              "model.hidden", "model.feature_dim", "eval.episodes", "eval.num_envs",
              "algo.lane.step_size", "algo.collision.step_size", "reward_scale")
-_NON_NEGATIVE = ("seed", "eval.every", "record_every", "eval.seed", "ppo.entropy_coeff",
+_NON_NEGATIVE = ("seed", "eval.every", "teacher.coeff", "teacher.frames",
+                 "teacher.final", "record_every", "eval.seed", "ppo.entropy_coeff",
                  "ppo.critic_coeff",
                  "algo.lane.threshold", "algo.lane.initial", "algo.lane.kp", "algo.lane.kd",
                  "algo.collision.threshold", "algo.collision.initial", "algo.collision.kp",
                  "algo.collision.kd", "action.baseline_collision_weight")
-_UNIT_INTERVAL = ("ppo.gamma", "ppo.gae_lambda")
+_UNIT_INTERVAL = ("ppo.gamma", "ppo.gae_lambda", "encounters")
 
 
 def validate(cfg: DictConfig | dict[str, Any]) -> TrainConfig:

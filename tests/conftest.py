@@ -29,4 +29,4 @@ def tiny_experiments(tmp_path_factory):
          str(runs), "--results", str(results)], cwd=Path(__file__).resolve().parents[1],
         capture_output=True, text=True, timeout=600)
     assert completed.returncode == 0, completed.stdout[-3000:] + completed.stderr[-3000:]
-    return runs / "state", results, completed.stdout
+    return runs / "pixels", results / "pixels", completed.stdout

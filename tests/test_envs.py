@@ -89,7 +89,7 @@ def test_rollout_reward_and_costs(build):
 
 def test_standing_still_is_truncated_not_terminated(build):
     """At the time limit the episode is truncated; nothing terminates a robot at rest."""
-    env = build("state", "continuous", overrides={"horizon": 10})
+    env = build("state", "duty", overrides={"horizon": 10})
     data = env.rollout(10, policy=lambda td: td.set("action", torch.zeros(NUM_ENVS, 2)),
                        break_when_any_done=False)
     truncated, terminated = data["next", "truncated"], data["next", "terminated"]

@@ -10,7 +10,7 @@ from pathlib import Path
 
 from conftest import TINY_EXPERIMENT
 
-from crllk.experiments import AGENTS, PAPER_TABLE1, table_markdown
+from crllk.experiments import AGENTS, PAPER_TABLE1, sweep_markdown, table_markdown
 from crllk.runs import read_eval_json
 
 REPO = Path(__file__).resolve().parents[1]
@@ -29,7 +29,7 @@ def test_table1_lists_every_agent_beside_the_paper(tiny_experiments):
     markdown = (results / "table1.md").read_text()
     assert markdown == table_markdown(document)
     assert "Budget: 16 environment frames per run" in markdown
-    assert "Observation: `state`" in markdown and "python -m crllk.experiments all" in markdown
+    assert "Observation: `pixels`" in markdown and "python -m crllk.experiments all" in markdown
     assert "| J_clane (paper) | 0.66 ± 0.02 | 0.99 ± 0.07 | 0.31 ± 0.00 | 1.04 ± 0.25 | |" \
         in markdown
     assert "CRLLK-D misses" in markdown or "CRLLK-D satisfies" in markdown
@@ -39,7 +39,7 @@ def test_map_tables_and_figure1_are_written(tiny_experiments):
     runs, results, _ = tiny_experiments
     for task in ("zigzag", "obstacle_loop"):
         document = json.loads((results / f"table_{task}.json").read_text())
-        assert list(document["agents"]) == ["CRLLK-D", "PPO-D"] and document["task"] == task
+        assert list(document["agents"]) == list(AGENTS) and document["task"] == task
     figure = json.loads((results / "figure1.json").read_text())
     assert list(figure["thresholds"]) == ["0.5", "0.75"]
     for entry in figure["thresholds"].values():
@@ -54,8 +54,29 @@ def test_a_second_invocation_reuses_finished_runs(tiny_experiments):
     runs, results, _ = tiny_experiments
     completed = subprocess.run(
         [sys.executable, "-m", "crllk.experiments", "table1", *TINY_EXPERIMENT, "--runs-root",
-         str(runs.parent), "--results", str(results)], cwd=REPO, capture_output=True,
+         str(runs.parent), "--results", str(results.parent)], cwd=REPO, capture_output=True,
         text=True, timeout=300)
     assert completed.returncode == 0, completed.stderr
     assert "training 0 of 4 runs" in completed.stdout
     assert "evaluating 0 of 4 runs" in completed.stdout
+
+
+def test_sweep_of_fixed_weights(tmp_path):
+    """A 1 × 2 weight grid on one map from state: the JSON holds every pair and CRLLK-D, the
+    Markdown is rebuilt from it, the figure is a PNG."""
+    completed = subprocess.run(
+        [sys.executable, "-m", "crllk.experiments", "sweep", *TINY_EXPERIMENT, "--obs", "state",
+         "--sweep-tasks", "zigzag", "--lane-weights", "1", "--collision-weights", "4", "16",
+         "--runs-root", str(tmp_path / "runs"), "--results", str(tmp_path / "results")],
+        cwd=REPO, capture_output=True, text=True, timeout=600)
+    assert completed.returncode == 0, completed.stdout[-2000:] + completed.stderr[-2000:]
+    results = tmp_path / "results" / "state"
+    document = json.loads((results / "sweep.json").read_text())
+    entry = document["maps"]["zigzag"]
+    assert [(e["lane_weight"], e["collision_weight"]) for e in entry["fixed"]] == [(1.0, 4.0),
+                                                                                  (1.0, 16.0)]
+    assert entry["crllk"]["agent"] == "CRLLK-D"
+    assert (results / "sweep.md").read_text() == sweep_markdown(document)
+    assert (results / "sweep.png").read_bytes()[:4] == b"\x89PNG"
+    run = tmp_path / "runs" / "state" / "zigzag" / "PPO-D-w1-16-a0.5-seed0"
+    assert read_eval_json(run)["source"]["multipliers"]["collision"] == 16.0

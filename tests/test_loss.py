@@ -358,3 +358,58 @@ def test_continuous_actions_give_finite_losses():
     sum(out[key] for key in _LOSS_KEYS).backward()
     assert _has_gradient(actor)
     assert all(torch.isfinite(p.grad).all() for p in actor.parameters() if p.grad is not None)
+
+
+# ---------------------------------------------------------------------- (g) imitation
+
+
+def test_imitation_term_is_off_by_default_and_needs_no_teacher_key():
+    loss, td = _loss()
+    assert "teacher_action" not in td
+    assert loss(td)["loss_imitation"].item() == 0.0
+
+
+def test_imitation_term_worked_example():
+    """A constant policy with logits (0, log 2, log 5) has probabilities (1/8, 2/8, 5/8); with
+    teacher actions 0, 2, 2, 1 and c_I = 0.5 the term is −0.5 · mean(log p)."""
+    logits = torch.log(torch.tensor([1.0, 2.0, 5.0]))
+
+    class Constant(nn.Module):
+        def forward(self, observation):
+            return logits.expand(*observation.shape[:-1], 3)
+
+    actor = ProbabilisticActor(TensorDictModule(Constant(), ["observation"], ["logits"]),
+                               in_keys=["logits"], distribution_class=Categorical,
+                               return_log_prob=True)
+    _, critic, cost_critics = _networks()
+    loss = LagrangianPPOLoss(actor, critic, cost_critics)
+    td = _categorical_batch(_networks()[0])[:4]
+    td["action_log_prob"] = actor.get_dist(td).log_prob(td["action"])
+    td["teacher_action"] = torch.tensor([0, 2, 2, 1])
+    loss.set_imitation_coeff(0.5)
+    expected = -0.5 * (torch.log(torch.tensor([1 / 8, 5 / 8, 5 / 8, 2 / 8]))).mean()
+    assert loss(td)["loss_imitation"].item() == pytest.approx(expected.item(), rel=1e-6)
+    with pytest.raises(ValueError, match="imitation_coeff"):
+        loss.set_imitation_coeff(-1.0)
+
+
+def test_imitation_pulls_the_policy_towards_the_teacher():
+    """Gradient steps on the imitation term alone raise the teacher's action probability,
+    for categorical and tanh-Gaussian policies (teacher actions on the box edge included)."""
+    for factory, teacher in ((_categorical_actor, torch.full((_BATCH,), 1)),
+                             (lambda: _tanh_normal_actor(2),
+                              torch.tensor([1.0, -0.5]).expand(_BATCH, 2))):
+        actor, critic, cost_critics = _networks(factory)
+        loss = LagrangianPPOLoss(actor, critic, cost_critics)
+        g = torch.Generator().manual_seed(3)
+        actions = teacher if factory is _categorical_actor else torch.zeros(_BATCH, 2)
+        td = _batch(actor, actions, g)
+        td["teacher_action"] = teacher
+        loss.set_imitation_coeff(1.0)
+        optimizer = torch.optim.Adam(actor.parameters(), lr=1e-2)
+        before = loss(td)["loss_imitation"].item()
+        for _ in range(50):
+            optimizer.zero_grad()
+            loss(td)["loss_imitation"].backward()
+            optimizer.step()
+        assert loss(td)["loss_imitation"].item() < before - 0.5

@@ -14,7 +14,11 @@ import pytest
 import crllk
 from crllk.actions import (
     DISCRETE_DUTIES,
+    MAX_DUTY_DIFFERENCE,
+    MAX_MEAN_DUTY,
+    MIN_MEAN_DUTY,
     discrete_to_duty,
+    drive_turn_to_duty,
     velocity_steering_to_duty,
 )
 from crllk.maps import load_map
@@ -337,6 +341,45 @@ def test_positive_steering_turns_left(physics_for):
     assert yaw_rate > 0.1
     _, yaw_rate = settle(physics, velocity_steering_to_duty((0.2, -1.0)), seconds=1.0)
     assert yaw_rate < -0.1
+
+
+@pytest.mark.parametrize(("action", "expected"), [
+    ((0.0, 0.0), (0.35, 0.35)),        # mean 0.1 + 0.5 * 0.5 = 0.35
+    ((-1.0, 0.0), (0.1, 0.1)),         # the slowest drive still moves forward
+    ((1.0, 0.0), (0.6, 0.6)),
+    ((0.0, 1.0), (0.1, 0.6)),          # difference 0.5: right wheel faster, turns left
+    ((0.0, -0.4), (0.45, 0.25)),
+    ((5.0, -3.0), (0.85, 0.35)),       # inputs clipped to the box first
+])
+def test_continuous_drive_and_turn(action, expected):
+    """velocity sets the mean duty in [0.1, 0.6]; steering the difference up to 0.5."""
+    assert (MIN_MEAN_DUTY, MAX_MEAN_DUTY, MAX_DUTY_DIFFERENCE) == (0.1, 0.6, 0.5)
+    np.testing.assert_allclose(drive_turn_to_duty(action), expected, atol=1e-12)
+
+
+def test_continuous_cannot_stand_still_by_dithering(physics_for):
+    """Alternating velocity +1 and -1 every step still drives forward (the mean duty of both
+    is positive), unlike the Duckietown mapping, where it stands still."""
+    for mapping, moves in ((drive_turn_to_duty, True), (velocity_steering_to_duty, False)):
+        physics = physics_for()
+        x0, y0, _ = physics.pose()
+        for k in range(60):
+            physics.set_wheel_duty(tuple(mapping((1.0 if k % 2 else -1.0, 0.0))))
+            physics.step(SUBSTEPS)
+        x, y, _ = physics.pose()
+        assert (math.hypot(x - x0, y - y0) > 0.2) == moves, mapping.__name__
+
+
+def test_continuous_reaches_the_discrete_turn_rates(physics_for):
+    """Full steering yaws faster than a discrete turn (1.35 rad/s) at any velocity; the
+    Duckietown mapping stays below 0.5 rad/s."""
+    physics = physics_for()
+    _, discrete_rate = settle(physics, discrete_to_duty(0), seconds=1.5)
+    for velocity in (-1.0, 0.0, 1.0):
+        _, rate = settle(physics_for(), drive_turn_to_duty((velocity, 1.0)), seconds=1.5)
+        assert rate > discrete_rate > 1.2, velocity
+    _, rate = settle(physics_for(), velocity_steering_to_duty((0.2, 1.0)), seconds=1.5)
+    assert 0.1 < rate < 0.5
 
 
 def test_discrete_action_table():

@@ -107,6 +107,7 @@ class DuckietownMap:
                                                      for ln in self._lanes[(t.column, t.row, e)])
                             for t in self.road_tiles}
         self._next_lanes = {_lane_key(ln): self._find_next_lane(ln) for ln in self.lanes}
+        self._directions: dict[Lane, str] | None = None  # built by direction_of
 
     # ----- grid -------------------------------------------------------------------------
     @property
@@ -223,6 +224,21 @@ class DuckietownMap:
         loops.sort(key=lambda lanes: -self._named_turns(lanes))
         lanes = loops[0] if direction == "intended" else loops[1]
         return sum(lane.length for lane in lanes)
+
+    def direction_of(self, lane: Lane) -> str | None:
+        """``"intended"`` or ``"reverse"``: which loop of the map ``lane`` belongs to (None on
+        maps whose road is not a single loop, e.g. with intersections)."""
+        if self._directions is None:
+            try:
+                loops = sorted((self.loop(first) for first in self._loop_starts()),
+                               key=lambda lanes: -self._named_turns(lanes))
+            except MapError:
+                loops = []
+            self._directions = {}
+            if len(loops) == 2 and len(loops[0]) + len(loops[1]) == len(self.lanes):
+                self._directions = {**dict.fromkeys(loops[1], "reverse"),
+                                    **dict.fromkeys(loops[0], "intended")}
+        return self._directions.get(lane)
 
     def loop(self, first: Lane) -> list[Lane]:
         """The closed sequence of lanes followed from ``first``.

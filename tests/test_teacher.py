@@ -1,0 +1,71 @@
+"""The privileged teacher: the swerving follower's duties as actions of each action type, the
+teacher's driving, and the ``teacher_action`` key of the batched env."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+from torchrl.envs.utils import check_env_specs
+
+import crllk
+from crllk.actions import drive_turn_duty, velocity_steering_duty
+from crllk.evaluation import run_episodes
+from crllk.teacher import Teacher, duty_to_action
+
+
+@pytest.mark.parametrize(("duty", "expected"), [
+    ((0.04, 0.4), 0),    # the left turn itself
+    ((0.25, 0.44), 0),   # difference 0.19 > 0.18: nearer the left turn
+    ((0.3, 0.3), 2),
+    ((0.3, 0.45), 2),    # difference 0.15: nearer straight
+    ((0.5, 0.1), 1),
+])
+def test_discrete_teacher_takes_the_nearest_turn(duty, expected):
+    assert duty_to_action("discrete", np.array(duty)).item() == expected
+
+
+@pytest.mark.parametrize("action", [(0.0, 0.0), (-0.6, 0.3), (0.9, -1.0)])
+def test_continuous_teacher_inverts_the_mappings(action):
+    """duty_to_action undoes drive_turn_duty and the Duckietown inverse kinematics."""
+    np.testing.assert_allclose(
+        duty_to_action("continuous", np.array(drive_turn_duty(*action))), action, atol=1e-12)
+    small = (0.5 * action[0], 0.5 * action[1])  # inside the unsaturated range of the IK
+    np.testing.assert_allclose(
+        duty_to_action("duckietown", np.array(velocity_steering_duty(*small))), small,
+        atol=1e-12)
+    assert np.all(np.abs(duty_to_action("continuous", np.array([1.0, -1.0]))) <= 1.0)
+
+
+@pytest.mark.parametrize("action", ["discrete", "continuous"])
+def test_teacher_passes_the_obstacles(action):
+    """Driving its own actions from 20 encounter starts on obstacle_loop (horizon 150), the
+    teacher never collides nor leaves the road."""
+    env = crllk.make_env("obstacle_loop", num_envs=10, observation="state", action=action,
+                         seed=4, overrides={"horizon": 150, "spawn": {"encounters": 1.0}})
+    teachers = [Teacher(env.config, task.obstacles, action) for task in env.tasks]
+    dtype = torch.int64 if action == "discrete" else torch.float32
+
+    def policy(td):
+        actions = np.stack([t.action(p) for t, p in zip(teachers, env.physics, strict=True)])
+        return td.set("action", torch.as_tensor(actions, dtype=dtype))
+
+    result = run_episodes(env, policy, 20)
+    assert result.summary.J_coll == 0.0
+    assert result.summary.J_R > 0.3
+
+
+def test_teacher_action_key_in_the_batched_env():
+    """With teacher=True observations carry the teacher's action of the observed state, equal
+    to asking a teacher directly; the specs hold and switching it off stops the updates."""
+    env = crllk.make_env("obstacle_loop", num_envs=3, observation="state", action="discrete",
+                         seed=0, teacher=True)
+    check_env_specs(env, seed=0)
+    td = env.reset()
+    teachers = [Teacher(env.config, task.obstacles, "discrete") for task in env.tasks]
+    direct = [t.action(p).item() for t, p in zip(teachers, env.physics, strict=True)]
+    assert td["teacher_action"].tolist() == direct
+    env.teacher_active = False
+    frozen = env.rand_step(td)["next", "teacher_action"]
+    assert frozen.tolist() == direct
+    assert "teacher_action" not in crllk.make_env("small_loop", observation="state").reset()
