@@ -49,6 +49,7 @@ from crllk.lane_keeping import (
     OBSERVATIONS,
     LaneKeeping,
     StepOutcome,
+    command_history_length,
     state_feature_names,
 )
 from crllk.sim.physics import Physics
@@ -73,7 +74,7 @@ class BatchedLaneKeepingEnv(EnvBase):
     def __init__(self, config: TaskConfig, *, num_envs: int = 1, observation: str = "pixels",
                  action: str = "discrete", seed: int | None = None,
                  privileged_state: bool = False, teacher: bool = False,
-                 device: torch.device | str = "cpu"):
+                 commands: bool = False, device: torch.device | str = "cpu"):
         if num_envs < 1:
             raise ValueError(f"num_envs must be at least 1, got {num_envs}")
         if observation not in OBSERVATIONS:
@@ -105,6 +106,11 @@ class BatchedLaneKeepingEnv(EnvBase):
         self.teacher_active = teacher
         self._teacher_actions = np.zeros((num_envs, *(() if action == "discrete" else (2,))),
                                          np.int64 if action == "discrete" else np.float32)
+        self.reports_commands = commands
+        """Whether observations carry ``"commands"``: the wheel duties (left, right) commanded
+        in the last steps, newest first (those still in flight through the motor delay), as
+        the policy's own memory of what it asked for."""
+        self._commands = np.zeros((num_envs, 2 * command_history_length(config)), np.float32)
         self.reports_encounters = config.spawn.encounters > 0
         """Whether observations carry ``"encounter"``: the episode started in front of an
         obstacle (``spawn.encounters``), so that metrics can leave such episodes out."""
@@ -137,6 +143,9 @@ class BatchedLaneKeepingEnv(EnvBase):
                                                device=self.device)
         if self.teachers:
             entries["teacher_action"] = self._action_spec_of(n)
+        if self.reports_commands:
+            entries["commands"] = Bounded(-1.0, 1.0, shape=self._commands.shape,
+                                          dtype=torch.float32, device=self.device)
         self.observation_spec = Composite(entries, shape=n, device=self.device)
         self.action_spec = self._action_spec_of(n)
         self.reward_spec = Composite(
@@ -184,6 +193,8 @@ class BatchedLaneKeepingEnv(EnvBase):
         self._observations[i] = task.main_observation(physics)
         if self.privileged_state:
             self._states[i] = task.state_feature_list(physics)
+        if self.reports_commands:
+            self._commands[i] = [value for duty in task.command_history for value in duty]
         if self.teacher_active and self.teachers:
             self._teacher_actions[i] = self.teachers[i].action(physics)
 
@@ -195,6 +206,8 @@ class BatchedLaneKeepingEnv(EnvBase):
             entries["encounter"] = torch.tensor([[task.encounter] for task in self.tasks])
         if self.teachers:
             entries["teacher_action"] = torch.from_numpy(self._teacher_actions.copy())
+        if self.reports_commands:
+            entries["commands"] = torch.from_numpy(self._commands.copy())
         return entries
 
     def _step(self, tensordict: TensorDictBase) -> TensorDictBase:
@@ -272,7 +285,8 @@ class BatchedLaneKeepingEnv(EnvBase):
         """The constructor arguments a snapshot must agree on."""
         return {"task": self.config.name, "num_envs": self.num_envs,
                 "observation": self.observation_type, "action": self.action_type,
-                "privileged_state": self.privileged_state, "teacher": bool(self.teachers)}
+                "privileged_state": self.privileged_state, "teacher": bool(self.teachers),
+                "commands": self.reports_commands}
 
     # ----- teardown ---------------------------------------------------------------------
     def close(self, *, raise_if_closed: bool = True) -> None:
@@ -296,7 +310,8 @@ def _build_physics(config: TaskConfig, num_envs: int, *, share_renderers: bool) 
 def make_env(task: str | Path, *, num_envs: int = 1, observation: str = "pixels",
              action: str = "discrete", seed: int | None = None,
              overrides: dict[str, Any] | None = None, privileged_state: bool = False,
-             teacher: bool = False, device: torch.device | str = "cpu") -> BatchedLaneKeepingEnv:
+             teacher: bool = False, commands: bool = False,
+             device: torch.device | str = "cpu") -> BatchedLaneKeepingEnv:
     """A TorchRL environment with ``num_envs`` lane-keeping simulations in one process.
 
     Args:
@@ -312,12 +327,14 @@ def make_env(task: str | Path, *, num_envs: int = 1, observation: str = "pixels"
             actor-critic); the policy still reads only ``"pixels"``.
         teacher: also return ``"teacher_action"``, the privileged teacher's action for each
             observation (:mod:`crllk.teacher`), for an imitation loss.
+        commands: also return ``"commands"`` (float32 ``[N, 2K]``), the wheel duties of the
+            last K steps, newest first (K covers the motor delay).
         device: where the returned tensors live (simulation runs on the CPU).
     """
     config = load_task_config(task, overrides)
     return BatchedLaneKeepingEnv(config, num_envs=num_envs, observation=observation,
                                  action=action, seed=seed, privileged_state=privileged_state,
-                                 teacher=teacher, device=device)
+                                 teacher=teacher, commands=commands, device=device)
 
 
 __all__ = ["COST_KEYS", "BatchedLaneKeepingEnv", "make_env", "sub_env_seeds"]

@@ -7,7 +7,11 @@
 
 Each run's checkpoint plays ``episodes`` seeded episodes (episode k in sub-environment
 k mod ``num_envs``, spawns from ``seed``, by default the run's evaluation seed, never a
-training seed) with its deterministic policy (``deterministic=false`` samples). The result goes
+training seed) with its policy as trained: actions are sampled, from a torch generator seeded
+with the same seed, so the numbers are reproducible (``deterministic=true`` takes the policy's
+mode instead). The multipliers enforce the constraints on the sampled policy, the one PPO
+trains; its mode is another policy, and with three discrete actions a much worse one: a policy
+that steers by mixing turns and straight steps loses the mix. The result goes
 to ``<run>/eval.json``: J_R (m), J_clane (dm), J_coll, episode length, the action histogram,
 termination reasons and one row per episode. Several runs also print (and with ``out=`` write)
 mean ± std across runs, the paper's way of reporting seeds. ``record=true`` also records
@@ -56,7 +60,7 @@ class EvaluateConfig:
     follower: bool = False
     task: str = "small_loop"
     episodes: int = 100
-    deterministic: bool = True
+    deterministic: bool = False
     seed: int | None = None
     num_envs: int = 10
     threads: int = 1
@@ -142,7 +146,7 @@ def result_document(result: EvaluationResult, action: str, *, thresholds: dict[s
             "episodes": rows}
 
 
-def evaluate_run(run_dir: str | Path, *, episodes: int, deterministic: bool = True,
+def evaluate_run(run_dir: str | Path, *, episodes: int, deterministic: bool = False,
                  seed: int | None = None, num_envs: int = 10) -> dict[str, Any]:
     """Plays the run's checkpoint and writes ``<run_dir>/eval.json``; returns its content."""
     config = load_run_config(run_dir)
@@ -150,7 +154,8 @@ def evaluate_run(run_dir: str | Path, *, episodes: int, deterministic: bool = Tr
     env = build_env(config, num_envs=num_envs, seed=seed)
     try:
         actor, info = load_actor(run_dir, env)
-        result = run_episodes(env, actor, episodes, deterministic=deterministic)
+        result = run_episodes(env, actor, episodes, deterministic=deterministic,
+                              sample_seed=seed)
     finally:
         env.close()
     source = {"run_dir": str(run_dir), "task": config.task_name, "algo": config.algo.name,

@@ -43,7 +43,8 @@ def episode_quotas(episodes: int, num_envs: int) -> np.ndarray:
 
 @torch.no_grad()
 def run_episodes(env: EnvBase, policy: Callable[[TensorDictBase], TensorDictBase],
-                 episodes: int, *, deterministic: bool = True) -> EvaluationResult:
+                 episodes: int, *, deterministic: bool = True,
+                 sample_seed: int | None = None) -> EvaluationResult:
     """Plays ``episodes`` full episodes with ``policy`` from a fresh reset of ``env``.
 
     Args:
@@ -51,7 +52,18 @@ def run_episodes(env: EnvBase, policy: Callable[[TensorDictBase], TensorDictBase
         policy: writes ``"action"`` into the tensordict it is given.
         episodes: how many episodes to finish in total.
         deterministic: take the policy's mode instead of sampling.
+        sample_seed: when sampling, seeds torch's generator for the episodes and restores it
+            afterwards, so the result depends only on the env's seed, ``N`` and this seed.
     """
+    if deterministic or sample_seed is None:
+        return _run_episodes(env, policy, episodes, deterministic)
+    with torch.random.fork_rng():
+        torch.manual_seed(sample_seed)
+        return _run_episodes(env, policy, episodes, deterministic)
+
+
+def _run_episodes(env: EnvBase, policy: Callable[[TensorDictBase], TensorDictBase],
+                  episodes: int, deterministic: bool) -> EvaluationResult:
     num_envs = int(env.batch_size[0])
     quotas = episode_quotas(episodes, num_envs)
     played = np.zeros(num_envs, dtype=np.int64)

@@ -55,6 +55,8 @@ PAPER_J_R_PER_METRE = 30.0
 MAP_TASKS = ("zigzag", "obstacle_loop")
 MAP_AGENTS = tuple(AGENTS)
 FIGURE_THRESHOLDS = (0.5, 0.75)
+PIXEL_FRAMES, STATE_FRAMES = 500_000, 300_000
+"""Default frames per run: the trainer's own defaults for each observation."""
 SWEEP_TASKS = ("small_loop", "zigzag", "obstacle_loop")
 SWEEP_LANE_WEIGHTS = (0.3, 1.0, 3.0)
 """Fixed λ_lane of the sweep's PPO-D runs (per dm of lane deviation)."""
@@ -95,7 +97,7 @@ class RunSpec:
 class Settings:
     """Budget and evaluation of an experiment."""
 
-    frames: int = 300_000
+    frames: int = PIXEL_FRAMES
     seeds: tuple[int, ...] = (0, 1)
     episodes: int = 100
     obs: str = "pixels"
@@ -136,7 +138,7 @@ def evaluation_is_current(run_dir: Path, settings: Settings) -> bool:
     return (document.get("source", {}).get("frames") == trained_frames(run_dir)
             and evaluation.get("episodes") == settings.episodes
             and evaluation.get("seed") == settings.eval_seed
-            and evaluation.get("deterministic") is True)
+            and evaluation.get("deterministic") is False)
 
 
 def run_parallel(commands: Sequence[tuple[list[str], Path]], jobs: int) -> list[str]:
@@ -295,8 +297,9 @@ def table_markdown(document: dict[str, Any]) -> str:
         f"- Budget: {settings['frames']:,} environment frames per run (training wall time "
         f"{min(minutes):.1f}–{max(minutes):.1f} min per run, {settings['jobs']} runs at a "
         "time).",
-        f"- Evaluation: {settings['episodes']} deterministic episodes per run, spawn seed "
-        f"{settings['eval_seed']} (never a training seed), the last checkpoint.",
+        f"- Evaluation: {settings['episodes']} episodes per run of the sampled policy (the one "
+        f"the constraints are learned for), spawn and sampling seed {settings['eval_seed']} "
+        "(never a training seed), the last checkpoint.",
         f"- Command: `{settings['command']}` ({document['wall_s'] / 60:.1f} min wall for the "
         "invocation that finished it; finished runs are reused).",
         f"- Machine: {settings['machine']}.", "",
@@ -460,8 +463,8 @@ def sweep_markdown(document: dict[str, Any]) -> str:
              f"seeds {', '.join(map(str, settings['seeds']))}; 'holds' means both constraints "
              f"hold on every seed.", "",
              f"- Observation: `{settings['obs']}`; budget {settings['frames']:,} frames per run; "
-             f"{settings['episodes']} deterministic evaluation episodes per run from spawn "
-             f"seed {settings['eval_seed']}.",
+             f"{settings['episodes']} evaluation episodes per run of the sampled policy, spawn "
+             f"and sampling seed {settings['eval_seed']}.",
              f"- Command: `{settings['command']}` ({document['wall_s'] / 60:.1f} min wall for "
              "the invocation that finished it).",
              f"- Machine: {settings['machine']}.", ""]
@@ -504,8 +507,9 @@ ALL = ("table1", "maps", "figure1")
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("experiment", choices=[*EXPERIMENTS, "all"])
-    parser.add_argument("--frames", type=int, default=Settings.frames,
-                        help="environment frames per training run")
+    parser.add_argument("--frames", type=int, default=None,
+                        help=f"environment frames per training run (pixels: {PIXEL_FRAMES:,}, "
+                             f"state: {STATE_FRAMES:,}, the trainer's defaults)")
     parser.add_argument("--seeds", type=int, nargs="+", default=list(Settings.seeds))
     parser.add_argument("--episodes", type=int, default=Settings.episodes,
                         help="evaluation episodes per run")
@@ -525,6 +529,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--set", nargs="*", default=[], metavar="KEY=VALUE",
                         help="extra trainer overrides for every run, e.g. ppo.epochs=5")
     args = parser.parse_args(argv)
+    if args.frames is None:
+        args.frames = PIXEL_FRAMES if args.obs == "pixels" else STATE_FRAMES
     for name in ("frames", "episodes", "jobs"):
         if getattr(args, name) < 1:
             parser.error(f"--{name} must be at least 1, got {getattr(args, name)}")

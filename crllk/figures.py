@@ -85,21 +85,25 @@ def save_figure(figure: Any, path: Path) -> Path:
 
 @torch.no_grad()
 def policy_trajectory(run_dir: str | Path, *, seed: int | None = None,
-                      deterministic: bool = True) -> dict[str, Any]:
-    """One episode of the run's policy from spawn ``seed`` (default: the run's evaluation
-    seed): the top-down picture with the driven trail (PIL image), the trail (x, y in m), the
-    per-step actions and lane costs, the distance (m) and the termination reason."""
+                      deterministic: bool = False) -> dict[str, Any]:
+    """One episode of the run's policy (sampled from a generator seeded with ``seed``, as the
+    evaluation plays it, or its mode with ``deterministic``) from spawn ``seed`` (default: the
+    run's evaluation seed): the top-down picture with the driven trail (PIL image), the trail
+    (x, y in m), the per-step actions and lane costs, the distance (m) and the termination
+    reason."""
     from crllk.pictures import topdown
 
     config = load_run_config(run_dir)
-    env = build_env(config, num_envs=1, seed=config.eval.seed if seed is None else seed)
+    seed = config.eval.seed if seed is None else seed
+    env = build_env(config, num_envs=1, seed=seed)
     try:
         actor, _ = load_actor(run_dir, env)
         physics, task = env.physics[0], env.tasks[0]
         td = env.reset()
         trail, actions, lane_costs, distance = [physics.pose()[:2]], [], [], 0.0
         exploration = ExplorationType.DETERMINISTIC if deterministic else ExplorationType.RANDOM
-        with set_exploration_type(exploration):
+        with set_exploration_type(exploration), torch.random.fork_rng():
+            torch.manual_seed(seed)
             while True:
                 td = env.step(actor(td))
                 trail.append(physics.pose()[:2])

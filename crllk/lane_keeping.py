@@ -67,12 +67,12 @@ def state_feature_names(config: TaskConfig) -> list[str]:
     for k in range(1, OBSTACLES_REPORTED + 1):
         names += [f"obstacle_distance_{k}", f"obstacle_lateral_left_{k}",
                   f"obstacle_lateral_right_{k}"]
-    for k in range(_command_history_length(config)):
+    for k in range(command_history_length(config)):
         names += [f"duty_left_t-{k}", f"duty_right_t-{k}"]
     return names
 
 
-def _command_history_length(config: TaskConfig) -> int:
+def command_history_length(config: TaskConfig) -> int:
     """Commands still in flight through the motor delay, plus the newest one."""
     return max(1, math.ceil(config.motor.delay * config.control_rate - 1e-9))
 
@@ -131,7 +131,7 @@ class LaneKeeping(base.Task):
         x, y, yaw = self._spawn_pose()
         physics.set_pose(x, y, yaw)
         physics.forward()
-        self._history = [(0.0, 0.0)] * _command_history_length(self.config)
+        self._history = [(0.0, 0.0)] * command_history_length(self.config)
         self._previous_pose = (x, y, yaw)
         pose = self.map.lane_pose(x, y, yaw)
         self._outcome = StepOutcome(0.0, pose, self._lane_cost(pose), 0.0, None)
@@ -227,6 +227,12 @@ class LaneKeeping(base.Task):
         if not pose.on_road:
             return self.config.off_road_lane_cost
         return abs(pose.lateral) * _METRES_TO_DECIMETRES
+
+    @property
+    def command_history(self) -> list[tuple[float, float]]:
+        """Wheel duties (left, right) of the last steps, newest first: those still in flight
+        through the motor delay and the newest one."""
+        return self._history
 
     @property
     def outcome(self) -> StepOutcome:

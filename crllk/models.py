@@ -47,6 +47,8 @@ class ModelConfig:
         critic_input: what the critics read: ``"observation"`` (the policy's input) or
             ``"state"`` (the lane-relative features, also with pixel policies: an asymmetric
             actor-critic; critics only shape training, so the policy still drives from pixels).
+        policy_commands: the policy also reads its own wheel commands of the last steps (those
+            still in flight through the motor delay), which a robot knows without sensing.
     """
 
     encoder: str = "fast"
@@ -55,6 +57,7 @@ class ModelConfig:
     initial_log_std: float = -0.5
     shared_critic: bool = False
     critic_input: str = "observation"
+    policy_commands: bool = False
 
 
 class PixelScale(nn.Module):
@@ -191,31 +194,59 @@ class GaussianParams(nn.Module):
         self.body = body
         self.log_std = nn.Parameter(torch.full((action_dim,), float(initial_log_std)))
 
-    def forward(self, observation: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        loc = self.body(observation)
+    def forward(self, *inputs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        loc = self.body(*inputs)
         return loc, self.log_std.exp().expand_as(loc)
+
+
+COMMANDS_SCALE = 0.5
+"""Typical magnitude of a commanded wheel duty (duty cycle), as for the state features."""
+
+
+class WithCommands(nn.Module):
+    """An observation encoder joined by the policy's recent wheel commands: their
+    concatenation goes through one tanh layer before ``head``."""
+
+    def __init__(self, encoder: nn.Module, width: int, commands_dim: int, hidden: int,
+                 head: nn.Module):
+        super().__init__()
+        self.encoder = encoder
+        self.joint = nn.Sequential(nn.Linear(width + commands_dim, hidden), nn.Tanh())
+        self.head = head
+
+    def forward(self, observation: torch.Tensor, commands: torch.Tensor) -> torch.Tensor:
+        features = torch.cat([self.encoder(observation), commands / COMMANDS_SCALE], dim=-1)
+        return self.head(self.joint(features))
 
 
 def make_actor(observation: str, observation_shape: Sequence[int], action: str,
                action_spec: TensorSpec, config: ModelConfig,
-               feature_names: Sequence[str] | None = None) -> ProbabilisticActor:
+               feature_names: Sequence[str] | None = None,
+               commands_dim: int = 0) -> ProbabilisticActor:
     """The policy: categorical over the three discrete actions, or a tanh-squashed Gaussian
     over (velocity, steering) in [-1, 1]². Writes ``action`` and ``action_log_prob``.
-    ``feature_names`` (state observations) choose the fixed input scales."""
+    ``feature_names`` (state observations) choose the fixed input scales. With
+    ``commands_dim`` the policy also reads ``"commands"``, its recent wheel duties."""
     encoder, width = make_encoder(observation, observation_shape, config, feature_names)
+    in_keys = [observation, "commands"] if commands_dim else [observation]
+
+    def body(out_dim: int) -> nn.Module:
+        head = _head(config.hidden if commands_dim else width, out_dim, gain=0.01)
+        if commands_dim:
+            return WithCommands(encoder, width, commands_dim, config.hidden, head)
+        return nn.Sequential(encoder, head)
+
     if action == "discrete":
         num_actions = int(action_spec.space.n)
-        net = nn.Sequential(encoder, _head(width, num_actions, gain=0.01))
-        module = TensorDictModule(net, in_keys=[observation], out_keys=["logits"])
+        module = TensorDictModule(body(num_actions), in_keys=in_keys, out_keys=["logits"])
         return ProbabilisticActor(module, in_keys=["logits"], spec=action_spec,
                                   distribution_class=Categorical, return_log_prob=True)
     if action not in ("continuous", "duckietown"):
         raise ValueError("action must be 'discrete', 'continuous' or 'duckietown', "
                          f"got {action!r}")
     action_dim = int(action_spec.shape[-1])
-    net = GaussianParams(nn.Sequential(encoder, _head(width, action_dim, gain=0.01)),
-                         action_dim, config.initial_log_std)
-    module = TensorDictModule(net, in_keys=[observation], out_keys=["loc", "scale"])
+    net = GaussianParams(body(action_dim), action_dim, config.initial_log_std)
+    module = TensorDictModule(net, in_keys=in_keys, out_keys=["loc", "scale"])
     low, high = action_spec.space.low, action_spec.space.high
     return ProbabilisticActor(module, in_keys=["loc", "scale"], spec=action_spec,
                               distribution_class=TanhNormal,

@@ -8,7 +8,7 @@ One iteration of the main loop (:func:`train`):
    advantage (A_r − Σλ_i A_ci) / (1 + Σλ_i);
 4. append a row to ``metrics.csv``; every ``checkpoint_every`` iterations (and at the end)
    write ``checkpoints/last.pt`` atomically; every ``eval.every`` iterations append a
-   deterministic evaluation to ``eval.csv``.
+   evaluation to ``eval.csv`` (the same episodes as ``python -m crllk.evaluate``).
 
 The checkpoint holds the networks, the optimiser, the multipliers, the counters, the random
 generators, the simulations' full state and the running episode sums, so ``resume=true``
@@ -87,7 +87,8 @@ def build_env(config: TrainConfig, *, num_envs: int, seed: int,
     return make_env(config.task_source(), num_envs=num_envs, observation=config.obs.name,
                     action=config.action.name, seed=seed, overrides=overrides,
                     privileged_state=config.model.critic_input == "state",
-                    teacher=training and (config.teacher.coeff > 0 or config.teacher.final > 0))
+                    teacher=training and (config.teacher.coeff > 0 or config.teacher.final > 0),
+                    commands=config.model.policy_commands)
 
 
 def build_learner(config: TrainConfig, env: BatchedLaneKeepingEnv) -> Learner:
@@ -95,8 +96,9 @@ def build_learner(config: TrainConfig, env: BatchedLaneKeepingEnv) -> Learner:
     shape = env.observation_spec[obs].shape[1:]
     model = ModelConfig(**vars(config.model))
     names = state_feature_names(env.config)
+    commands_dim = env.observation_spec["commands"].shape[-1] if model.policy_commands else 0
     actor = make_actor(obs, shape, config.action.name, env.action_spec, model,
-                       names if obs == "state" else None)
+                       names if obs == "state" else None, commands_dim=commands_dim)
     value_keys = {"reward": "state_value", **{c: f"state_value_{c}" for c in COSTS}}
     critic_obs = "state" if model.critic_input == "state" else obs
     critic_shape = env.observation_spec[critic_obs].shape[1:]
@@ -399,7 +401,7 @@ def print_last_evaluation(path: Path, config: TrainConfig) -> None:
         return
     last = rows[-1]
     verdict = "both constraints hold" if last["satisfied"] == "1" else "constraints violated"
-    print(f"evaluation at {last['frames']} frames ({last['episodes']} deterministic episodes): "
+    print(f"evaluation at {last['frames']} frames ({last['episodes']} episodes): "
           f"J_R {float(last['J_R']):.2f} m, J_clane {float(last['J_clane']):.3f} dm "
           f"(≤ {config.algo.lane.threshold}), J_coll {float(last['J_coll']):.3f} "
           f"(≤ {config.algo.collision.threshold}): {verdict}", flush=True)
@@ -417,9 +419,11 @@ def progress_text(row: dict[str, Any]) -> str:
 
 def evaluate(config: TrainConfig, env: BatchedLaneKeepingEnv, learner: Learner, iteration: int,
              frames: int, time_s: float) -> dict[str, Any]:
-    """Deterministic episodes from the evaluation seed; whether both constraints hold."""
+    """Episodes of the sampled policy from the evaluation seed (spawns and action samples),
+    as ``python -m crllk.evaluate`` plays them; whether both constraints hold."""
     env.set_seed(config.eval.seed)
-    summary = run_episodes(env, learner.actor, config.eval.episodes).summary
+    summary = run_episodes(env, learner.actor, config.eval.episodes, deterministic=False,
+                           sample_seed=config.eval.seed).summary
     satisfied = (summary.J_clane <= config.algo.lane.threshold
                  and summary.J_coll <= config.algo.collision.threshold)
     return {"iteration": iteration, "frames": frames, "time_s": time_s, **summary.as_row(),

@@ -77,6 +77,7 @@ class ModelSchema:
     initial_log_std: float = -0.5
     shared_critic: bool = False
     critic_input: str = "observation"
+    policy_commands: bool = False
 
 
 @dataclass

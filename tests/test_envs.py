@@ -253,3 +253,19 @@ def test_privileged_state_rides_along_with_pixels():
     finally:
         pixels.close()
         state.close()
+
+
+def test_commands_are_the_duties_in_flight(build):
+    """``"commands"`` holds the duty pairs of the last steps, newest first; a discrete left
+    turn shows up as (0.04, 0.4) at the front, and the specs hold."""
+    env = make_env(TASK, num_envs=2, observation="pixels", action="discrete", seed=0,
+                   overrides=SHORT, commands=True)
+    check_env_specs(env, seed=0)
+    td = env.reset()
+    assert td["commands"].shape == (2, 10) and not td["commands"].any()
+    td["action"] = torch.tensor([0, 2])
+    nxt = env.step(td)["next"]
+    assert nxt["commands"][0, :2].tolist() == pytest.approx([0.04, 0.4])
+    assert nxt["commands"][1, :2].tolist() == pytest.approx([0.3, 0.3])
+    assert not nxt["commands"][:, 2:].any()
+    env.close()

@@ -92,3 +92,23 @@ def test_loss_runs_a_shared_critic_once_per_batch():
     assert len(calls) == 1
     sum(out[k] for k in ("loss_objective", "loss_critic", "loss_cost_critic")).backward()
     assert critic.module.head.weight.grad.abs().sum(dim=1).gt(0).all()  # every head learns
+
+
+@pytest.mark.parametrize("action", ["discrete", "continuous"])
+def test_pixel_actor_with_commands_reads_them(action):
+    """With commands_dim the actor reads "commands" too: changing only the commands changes
+    the action distribution."""
+    spec = Categorical(3) if action == "discrete" else Bounded(-1.0, 1.0, shape=(2,))
+    torch.manual_seed(0)
+    actor = make_actor("pixels", IMAGE, action, spec, ModelConfig(), commands_dim=10)
+    pixels = torch.randint(0, 256, (4, *IMAGE), dtype=torch.uint8)
+    dists = []
+    for value in (0.0, 0.8):
+        td = TensorDict({"pixels": pixels, "commands": torch.full((4, 10), value)}, [4])
+        dists.append(actor.get_dist(td))
+    if action == "discrete":
+        assert not torch.allclose(dists[0].logits, dists[1].logits)
+    else:
+        assert not torch.allclose(dists[0].deterministic_sample, dists[1].deterministic_sample)
+    with pytest.raises(KeyError):
+        actor(TensorDict({"pixels": pixels}, [4]))

@@ -215,3 +215,58 @@ def test_a_run_being_trained_cannot_be_trained_twice(tmp_path):
         holder.wait()
     result = run_command(*TINY, f"run_dir={run_dir}", "resume=true", "total_frames=16")
     assert result.returncode == 0, result.stderr
+
+
+def test_imitation_weight_schedule():
+    """teacher.coeff 1 falling to teacher.final 0.1 over 100 frames, then staying there."""
+    from crllk.train import imitation_coeff
+
+    config = validate(compose_config(["teacher.coeff=1.0", "teacher.final=0.1",
+                                      "teacher.frames=100"]))
+    assert [imitation_coeff(config, f) for f in (0, 50, 100, 1000)] == pytest.approx(
+        [1.0, 0.55, 0.1, 0.1])
+    off = validate(compose_config(["teacher.coeff=0", "teacher.final=0"]))
+    assert imitation_coeff(off, 0) == 0.0
+
+
+def test_teacher_and_encounters_reach_the_training_run(tmp_path):
+    """On obstacle_loop with every training episode an encounter, metrics.csv reports the
+    encounter episodes apart (J_* stay empty: no episode of the task's own spawns), the
+    imitation loss is positive, and the evaluation env keeps the task's own spawns."""
+    run = run_in_process(tmp_path / "run", 3, ["task=obstacle_loop", "obs=state",
+                                               "encounters=1.0", "teacher.coeff=1.0",
+                                               "eval.every=3", "eval.episodes=2",
+                                               "eval.num_envs=2"])
+    rows = read_rows(run / "metrics.csv")
+    assert sum(int(r["encounter_episodes"]) for r in rows) >= NUM_ENVS
+    assert all(int(r["episodes"]) == 0 and r["J_coll"] == "nan" for r in rows)
+    assert all(float(r["loss_imitation"]) > 0 for r in rows)
+    assert float(rows[-1]["lambda_collision"]) == 0.0  # no episode of the task's own spawns
+    assert int(read_rows(run / "eval.csv")[0]["episodes"]) == 2
+
+
+@pytest.mark.parametrize(("override", "field"), [("encounters=1.5", "encounters"),
+                                               ("teacher.coeff=-1", "teacher.coeff"),
+                                               ("teacher.final=nan", "teacher.final")])
+def test_bad_teacher_and_encounter_overrides(override, field):
+    from crllk.errors import ConfigError
+
+    with pytest.raises(ConfigError, match=field):
+        validate(compose_config([override]))
+
+
+def test_last_evaluation_row_agrees_with_crllk_evaluate(tmp_path):
+    """The evaluation written at the end of training is the one python -m crllk.evaluate
+    makes of the last checkpoint with the same episodes: same numbers, same verdict."""
+    from crllk.evaluate import evaluate_run
+
+    run = run_in_process(tmp_path / "run", 2, ["task=obstacle_loop", "obs=state",
+                                               "eval.every=5", "eval.episodes=4",
+                                               "eval.num_envs=2", "task.horizon=40"])
+    last = read_rows(run / "eval.csv")[-1]
+    assert int(last["iteration"]) == 2  # not a multiple of eval.every: the final evaluation
+    document = evaluate_run(run, episodes=4, num_envs=2)
+    summary = document["summary"]
+    for key in ("J_R", "J_clane", "J_coll"):
+        assert float(last[key]) == pytest.approx(summary[key], rel=1e-5), key
+    assert bool(int(last["satisfied"])) == summary["satisfied"]
