@@ -86,12 +86,14 @@ def env_rate(task: str, observation: str, steps: int, seed: int = 0) -> float:
 
 
 def time_to_constraints(run_dir: Path) -> tuple[float | None, int | None]:
-    """Wall time (s) and frames at the first evaluation in ``run_dir/eval.csv`` where both
-    constraints held, or ``(None, None)`` if none did."""
+    """Training time (s: wall time without the evaluations before it) and frames at the first
+    evaluation in ``run_dir/eval.csv`` where both constraints held, or ``(None, None)``."""
+    evaluating = 0.0
     with (run_dir / "eval.csv").open(newline="") as handle:
         for row in csv.DictReader(handle):
             if row["satisfied"] == "1":
-                return float(row["time_s"]), int(row["frames"])
+                return float(row["time_s"]) - evaluating, int(row["frames"])
+            evaluating += float(row.get("evaluation_s") or 0.0)
     return None, None
 
 

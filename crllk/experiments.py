@@ -10,8 +10,10 @@ Every run trains in its own ``python -m crllk.train ... resume=true`` process, `
 time (one per core), so an interrupted experiment picks up where its runs stopped and finished
 runs are not trained again. Each run is then evaluated (``python -m crllk.evaluate``; an
 ``eval.json`` of the same checkpoint and settings is reused) and the results are written to
-``results/<obs>/``: a Markdown table with the paper's numbers beside ours and the JSON behind it, or
-the figures.
+``results/<obs>/``: a Markdown table with the paper's numbers beside ours and the JSON behind it,
+or the figures. Runs live in ``results/runs/<obs>/<task>/`` and are kept in the repository
+without their checkpoints (configuration, logs, ``eval.json``), so a finished run is reused by a
+later invocation even where its checkpoint is gone.
 """
 
 from __future__ import annotations
@@ -102,7 +104,7 @@ class Settings:
     episodes: int = 100
     obs: str = "pixels"
     jobs: int = 2
-    runs_root: Path = Path("runs/experiments")
+    runs_root: Path = Path("results/runs")
     results: Path = Path("results")
     eval_seed: int = DEFAULT_SEED
     command: str = ""
@@ -122,11 +124,14 @@ class Outcome:
 
 # ----- running ------------------------------------------------------------------------------
 def trained_frames(run_dir: Path) -> int:
-    """Frames in the run's last checkpoint (0 without one)."""
+    """Frames in the run's last checkpoint; without one, those of its ``eval.json`` (a
+    finished run kept without its checkpoint, as ``results/runs`` keeps them); else 0."""
     path = run_dir / CHECKPOINT_FILE
-    if not path.is_file():
-        return 0
-    return int(torch.load(path, map_location="cpu", weights_only=False)["frames"])
+    if path.is_file():
+        return int(torch.load(path, map_location="cpu", weights_only=False)["frames"])
+    if (run_dir / EVAL_FILE).is_file():
+        return int(read_eval_json(run_dir).get("source", {}).get("frames", 0))
+    return 0
 
 
 def evaluation_is_current(run_dir: Path, settings: Settings) -> bool:

@@ -6,7 +6,10 @@ J_R − Σ_i λ_i J_Ci. Its advantage is combined from one GAE per signal and no
     A = (A_r − Σ_i λ_i A_ci) / (1 + Σ_i λ_i)
 
 Dividing by 1 + Σλ keeps the advantage (and so the step size) of the same order however large λ
-grows; the direction is that of the penalised reward r − Σ λ_i c_i. Advantages are computed
+grows, when advantages are used as they are; the direction is that of the penalised reward
+r − Σ λ_i c_i. With ``normalize_advantage`` (the trainer's default) the combined advantage is
+standardised per minibatch, which undoes any positive scale: the division then changes nothing,
+and the multipliers alone set the balance between reward and costs. Advantages are computed
 outside the loss, by the GAE modules of :func:`make_advantage_modules`; the multipliers are
 updated outside it too (:mod:`crllk.lagrange`) and handed over with :meth:`set_multipliers`.
 """

@@ -278,8 +278,10 @@ def metric_columns(action: str) -> list[str]:
     return [*columns, "action_velocity_mean", "action_steering_mean", "action_steering_std"]
 
 
-EVAL_COLUMNS = ["iteration", "frames", "time_s", "episodes", "J_R", "J_clane", "J_coll",
-                "episode_length", "satisfied"]
+EVAL_COLUMNS = ["iteration", "frames", "time_s", "evaluation_s", "episodes", "J_R", "J_clane",
+                "J_coll", "episode_length", "satisfied"]
+"""``time_s``: wall time of the run when the evaluation began (earlier evaluations included);
+``evaluation_s``: how long this evaluation took."""
 
 
 # ----- the main loop -----------------------------------------------------------------------
@@ -421,13 +423,15 @@ def evaluate(config: TrainConfig, env: BatchedLaneKeepingEnv, learner: Learner, 
              frames: int, time_s: float) -> dict[str, Any]:
     """Episodes of the sampled policy from the evaluation seed (spawns and action samples),
     as ``python -m crllk.evaluate`` plays them; whether both constraints hold."""
+    began = time.perf_counter()
     env.set_seed(config.eval.seed)
     summary = run_episodes(env, learner.actor, config.eval.episodes, deterministic=False,
                            sample_seed=config.eval.seed).summary
     satisfied = (summary.J_clane <= config.algo.lane.threshold
                  and summary.J_coll <= config.algo.collision.threshold)
     return {"iteration": iteration, "frames": frames, "time_s": time_s, **summary.as_row(),
-            "episode_length": summary.length, "satisfied": int(satisfied)}
+            "episode_length": summary.length, "satisfied": int(satisfied),
+            "evaluation_s": time.perf_counter() - began}
 
 
 def record_iteration(config: TrainConfig, env: BatchedLaneKeepingEnv, learner: Learner,
