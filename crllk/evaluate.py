@@ -233,9 +233,17 @@ def format_summary(document: dict[str, Any]) -> str:
     s, src = document["summary"], document["source"]
     name = src.get("run_dir") or f"{src['algo']} on {src['task']}"
     verdict = "both constraints hold" if s["satisfied"] else "constraints violated"
-    return (f"{name}: {document['evaluation']['episodes']} episodes: J_R {s['J_R']:.2f} m, "
+    text = (f"{name}: {document['evaluation']['episodes']} episodes: J_R {s['J_R']:.2f} m, "
             f"J_clane {s['J_clane']:.3f} dm, J_coll {s['J_coll']:.3f}, "
             f"length {s['episode_length']:.0f}: {verdict}")
+    split = document.get("breakdown", {})
+    for direction, row in split.get("by_direction", {}).items():
+        text += (f"\n  started {direction}: {row['episodes']} episodes, J_clane "
+                 f"{row['J_clane']:.3f} dm, J_coll {row['J_coll']:.3f}")
+    if split.get("collisions_by_object"):
+        text += "\n  ended on: " + ", ".join(f"{obstacle} ×{count}" for obstacle, count
+                                            in split["collisions_by_object"].items())
+    return text
 
 
 def format_aggregate(result: dict[str, Any]) -> str:
