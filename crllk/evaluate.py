@@ -3,6 +3,7 @@
     python -m crllk.evaluate run=runs/small_loop/crllk-discrete-state-seed0 episodes=100
     python -m crllk.evaluate 'runs=[runs/a,runs/b]' episodes=100 out=results/ab.json
     python -m crllk.evaluate follower=true task=small_loop episodes=100
+    python -m crllk.evaluate teacher=true task=obstacle_loop episodes=100   # the swerving teacher
     python -m crllk.evaluate run=... episodes=100 record=true record_episodes=2 [viewer=spawn]
 
 Each run's checkpoint plays ``episodes`` seeded episodes (episode k in sub-environment
@@ -58,6 +59,7 @@ class EvaluateConfig:
     run: str | None = None
     runs: list[str] = field(default_factory=list)
     follower: bool = False
+    teacher: bool = False
     task: str = "small_loop"
     episodes: int = 100
     deterministic: bool = False
@@ -174,11 +176,13 @@ def evaluate_run(run_dir: str | Path, *, episodes: int, deterministic: bool = Fa
 
 def evaluate_follower(task: str | Path, *, episodes: int, seed: int = DEFAULT_SEED,
                       num_envs: int = 10, thresholds: dict[str, float] | None = None,
-                      ) -> dict[str, Any]:
-    """The scripted lane follower through the same episodes and metrics as a run."""
+                      avoid_obstacles: bool = False) -> dict[str, Any]:
+    """The scripted lane follower through the same episodes and metrics as a run; with
+    ``avoid_obstacles`` the training teacher, which swerves around obstacles."""
     env = make_env(task, num_envs=num_envs, observation="state", action="duty", seed=seed)
     try:
-        result = run_episodes(env, FollowerPolicy(env), episodes)
+        result = run_episodes(env, FollowerPolicy(env, avoid_obstacles=avoid_obstacles),
+                              episodes)
     finally:
         env.close()
     objects = env.config.map.objects
@@ -186,7 +190,8 @@ def evaluate_follower(task: str | Path, *, episodes: int, seed: int = DEFAULT_SE
         result, "duty", thresholds=thresholds or {"lane": 0.5, "collision": 0.02},
         settings={"episodes": episodes, "seed": seed, "num_envs": num_envs,
                   "deterministic": True},
-        source={"task": str(task), "algo": "follower", "action": "duty", "obs": "state"},
+        source={"task": str(task), "algo": "teacher" if avoid_obstacles else "follower",
+                "action": "duty", "obs": "state"},
         objects=objects)
 
 
@@ -270,8 +275,9 @@ def parse(argv: Sequence[str]) -> EvaluateConfig:
     for key in ("episodes", "num_envs", "threads", "record_episodes"):
         if getattr(config, key) < 1:
             raise ConfigError(SOURCE, key, f"must be >= 1, got {getattr(config, key)}")
-    if not config.run_dirs() and not config.follower:
-        raise ConfigError(SOURCE, "run", "give run=<run_dir>, runs=[...] or follower=true")
+    if not config.run_dirs() and not config.follower and not config.teacher:
+        raise ConfigError(SOURCE, "run", "give run=<run_dir>, runs=[...], follower=true or "
+                          "teacher=true")
     for run_dir in config.run_dirs():
         if not run_dir.is_dir():
             raise ConfigError(SOURCE, "run", f"no such run directory: {run_dir}")
@@ -295,13 +301,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         if len(documents) > 1:
             output["aggregate"] = aggregate(documents)
             print(format_aggregate(output["aggregate"]), flush=True)
-        if config.follower:
-            thresholds = {"lane": config.lane_threshold, "collision": config.collision_threshold}
-            output["follower"] = evaluate_follower(
-                config.task, episodes=config.episodes, num_envs=config.num_envs,
-                seed=DEFAULT_SEED if config.seed is None else config.seed,
-                thresholds=thresholds)
-            print(format_summary(output["follower"]), flush=True)
+        thresholds = {"lane": config.lane_threshold, "collision": config.collision_threshold}
+        for name in ("follower", "teacher"):
+            if getattr(config, name):
+                output[name] = evaluate_follower(
+                    config.task, episodes=config.episodes, num_envs=config.num_envs,
+                    seed=DEFAULT_SEED if config.seed is None else config.seed,
+                    thresholds=thresholds, avoid_obstacles=name == "teacher")
+                print(format_summary(output[name]), flush=True)
         if config.out:
             output["runs"] = documents
             Path(config.out).parent.mkdir(parents=True, exist_ok=True)

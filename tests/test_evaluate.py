@@ -158,3 +158,12 @@ def test_a_pixel_run_with_state_critics_evaluates_and_draws(tmp_path):
     assert document["source"]["obs"] == "pixels" and len(document["episodes"]) == 2
     episode = policy_trajectory(run)
     assert len(episode["trail"]) == len(episode["lane_costs"]) + 1
+
+
+def test_teacher_reference_passes_obstacles():
+    """The swerving teacher through the evaluation: no collision in 6 short episodes of
+    obstacle_loop where the plain follower collides."""
+    teacher = evaluate_follower("obstacle_loop", episodes=6, num_envs=3, seed=1000000,
+                                avoid_obstacles=True)
+    assert teacher["source"]["algo"] == "teacher"
+    assert teacher["summary"]["J_coll"] == 0.0

@@ -80,3 +80,19 @@ def test_sweep_of_fixed_weights(tmp_path):
     assert (results / "sweep.png").read_bytes()[:4] == b"\x89PNG"
     run = tmp_path / "runs" / "state" / "zigzag" / "PPO-D-w1-16-a0.5-seed0"
     assert read_eval_json(run)["source"]["multipliers"]["collision"] == 16.0
+
+
+def test_a_finished_run_without_its_checkpoint_is_reused(tiny_experiments, tmp_path):
+    """results/runs keeps runs without checkpoints: such a run counts as trained to the frames
+    of its eval.json and its evaluation as current, so nothing is trained again."""
+    import shutil
+
+    from crllk.experiments import Settings, evaluation_is_current, trained_frames
+
+    runs, _, _ = tiny_experiments
+    kept = tmp_path / "kept"
+    shutil.copytree(runs / "small_loop" / "CRLLK-D-a0.5-seed0", kept)
+    shutil.rmtree(kept / "checkpoints")
+    assert trained_frames(kept) == 16
+    assert evaluation_is_current(kept, Settings(frames=16, episodes=2))
+    assert trained_frames(tmp_path / "nothing") == 0
