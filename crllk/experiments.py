@@ -55,7 +55,6 @@ PAPER_TABLE1 = {
 PAPER_J_R_PER_METRE = 30.0
 """The original reward summed speed x cos(heading) per 30 Hz step: about 30 per metre."""
 MAP_TASKS = ("zigzag", "obstacle_loop")
-MAP_AGENTS = tuple(AGENTS)
 FIGURE_THRESHOLDS = (0.5, 0.75)
 PIXEL_FRAMES, STATE_FRAMES = 500_000, 300_000
 """Default frames per run: the trainer's own defaults for each observation."""
@@ -109,6 +108,8 @@ class Settings:
     eval_seed: int = DEFAULT_SEED
     command: str = ""
     train_overrides: tuple[str, ...] = ()
+    agents: tuple[str, ...] = tuple(AGENTS)
+    """The agents of Table 1 and the maps table (all four by default)."""
     sweep_tasks: tuple[str, ...] = SWEEP_TASKS
     lane_weights: tuple[float, ...] = SWEEP_LANE_WEIGHTS
     collision_weights: tuple[float, ...] = SWEEP_COLLISION_WEIGHTS
@@ -357,19 +358,27 @@ def _settings_dict(settings: Settings) -> dict[str, Any]:
 
 # ----- experiments --------------------------------------------------------------------------
 def table1(settings: Settings) -> Path:
-    specs = [RunSpec(agent, "small_loop", seed) for agent in AGENTS for seed in settings.seeds]
+    agents = list(settings.agents)
+    specs = [RunSpec(agent, "small_loop", seed) for agent in agents for seed in settings.seeds]
     outcome = train_and_evaluate(specs, settings)
-    return write_table("table1", "Table 1: small_loop", "small_loop", list(AGENTS), outcome,
-                       settings, PAPER_TABLE1, [("CRLLK-D", "PPO-D"), ("CRLLK-C", "PPO-C")])
+    return write_table("table1", "Table 1: small_loop", "small_loop", agents, outcome,
+                       settings, PAPER_TABLE1, _pairs(agents))
 
 
 def maps(settings: Settings) -> list[Path]:
-    specs = [RunSpec(agent, task, seed) for task in MAP_TASKS for agent in MAP_AGENTS
+    agents = list(settings.agents)
+    specs = [RunSpec(agent, task, seed) for task in MAP_TASKS for agent in agents
              for seed in settings.seeds]
     outcome = train_and_evaluate(specs, settings)
-    return [write_table(f"table_{task}", f"CRLLK vs PPO: {task}", task, MAP_AGENTS, outcome,
-                        settings, None, [("CRLLK-D", "PPO-D"), ("CRLLK-C", "PPO-C")])
+    return [write_table(f"table_{task}", f"CRLLK vs PPO: {task}", task, agents, outcome,
+                        settings, None, _pairs(agents))
             for task in MAP_TASKS]
+
+
+def _pairs(agents: Sequence[str]) -> list[tuple[str, str]]:
+    """The (CRLLK, PPO) pairs of the same action type among ``agents``."""
+    return [pair for pair in (("CRLLK-D", "PPO-D"), ("CRLLK-C", "PPO-C"))
+            if pair[0] in agents and pair[1] in agents]
 
 
 def figure1(settings: Settings) -> list[Path]:
@@ -516,6 +525,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                         help=f"environment frames per training run (pixels: {PIXEL_FRAMES:,}, "
                              f"state: {STATE_FRAMES:,}, the trainer's defaults)")
     parser.add_argument("--seeds", type=int, nargs="+", default=list(Settings.seeds))
+    parser.add_argument("--agents", nargs="+", choices=list(AGENTS), default=list(AGENTS),
+                        help="table1 and maps: the agents to train and tabulate")
     parser.add_argument("--episodes", type=int, default=Settings.episodes,
                         help="evaluation episodes per run")
     parser.add_argument("--obs", choices=("state", "pixels"), default=Settings.obs)
@@ -543,7 +554,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     settings = Settings(frames=args.frames, seeds=tuple(args.seeds), episodes=args.episodes,
                         obs=args.obs, jobs=args.jobs, runs_root=args.runs_root / args.obs,
                         results=args.results / args.obs, command=command,
-                        train_overrides=tuple(args.set), sweep_tasks=tuple(args.sweep_tasks),
+                        train_overrides=tuple(args.set), agents=tuple(args.agents),
+                        sweep_tasks=tuple(args.sweep_tasks),
                         lane_weights=tuple(args.lane_weights),
                         collision_weights=tuple(args.collision_weights))
     names = list(ALL) if args.experiment == "all" else [args.experiment]

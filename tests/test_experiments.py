@@ -61,6 +61,23 @@ def test_a_second_invocation_reuses_finished_runs(tiny_experiments):
     assert "evaluating 0 of 4 runs" in completed.stdout
 
 
+def test_agents_choose_the_columns(tiny_experiments, tmp_path):
+    """--agents trains and tabulates only those agents (here reusing the finished runs)."""
+    runs, _, _ = tiny_experiments
+    completed = subprocess.run(
+        [sys.executable, "-m", "crllk.experiments", "table1", *TINY_EXPERIMENT, "--agents",
+         "CRLLK-D", "CRLLK-C", "--runs-root", str(runs.parent), "--results", str(tmp_path)],
+        cwd=REPO, capture_output=True, text=True, timeout=300)
+    assert completed.returncode == 0, completed.stderr
+    assert "training 0 of 2 runs" in completed.stdout
+    document = json.loads((tmp_path / "pixels" / "table1.json").read_text())
+    assert list(document["agents"]) == ["CRLLK-D", "CRLLK-C"] and document["pairs"] == []
+    rejected = subprocess.run(
+        [sys.executable, "-m", "crllk.experiments", "table1", "--agents", "SAC"], cwd=REPO,
+        capture_output=True, text=True, timeout=60)
+    assert rejected.returncode == 2 and "invalid choice: 'SAC'" in rejected.stderr
+
+
 def test_sweep_of_fixed_weights(tmp_path):
     """A 1 × 2 weight grid on one map from state: the JSON holds every pair and CRLLK-D, the
     Markdown is rebuilt from it, the figure is a PNG."""
