@@ -27,7 +27,7 @@ from tensordict.nn import TensorDictModule
 from tensordict.utils import NestedKey
 from torch import nn
 from torch.distributions import Distribution
-from torchrl.modules import ProbabilisticActor
+from torchrl.modules import ProbabilisticActor, TanhNormal
 from torchrl.objectives import LossModule
 from torchrl.objectives.value import GAE
 
@@ -64,6 +64,9 @@ class LagrangianPPOLoss(LossModule):
 The imitation term pulls the policy towards a teacher's action ``teacher_action`` recorded for
 each state (:mod:`crllk.teacher`); its weight c_I (``imitation_coeff``, settable between
 updates like the multipliers) is 0 by default, and then the term is 0 and needs no teacher key.
+For a tanh-Gaussian policy the term moves only the mean: the scale enters it detached, because a
+scripted teacher says what to do, not how sure the policy should be, and its corrections at the
+edge of the box (atanh of nearly ±1) would otherwise inflate the policy's noise.
 
     The sum of the ``loss_*`` entries is the quantity to minimise. Diagnostics (detached):
     ``entropy``, ``kl_approx`` = mean((ρ − 1) − log ρ) (the non-negative "k3" estimator, where
@@ -289,12 +292,16 @@ updates like the multipliers) is 0 by default, and then the term is 0 and needs 
 
     def _imitation_loss(self, td: TensorDictBase, dist: Distribution) -> torch.Tensor:
         """−c_I · mean(log π_θ(a_teacher|s)); 0 when c_I is 0. Continuous teacher actions are
-        kept just inside the box, where a tanh-squashed policy's density is finite."""
+        kept just inside the box, where a tanh-squashed policy's density is finite, and the
+        tanh-Gaussian's scale is detached (the term trains its mean only)."""
         if float(self.imitation_coeff) == 0.0:
             return torch.zeros((), dtype=self.imitation_coeff.dtype)
         target = _get(td, self.tensor_keys.teacher_action)
         if target.is_floating_point():
             target = target.clamp(-1.0 + _TEACHER_MARGIN, 1.0 - _TEACHER_MARGIN)
+        if isinstance(dist, TanhNormal):
+            dist = TanhNormal(dist.loc, dist.scale.detach(), upscale=dist.upscale, low=dist.low,
+                              high=dist.high, tanh_loc=dist.tanh_loc)
         return -self.imitation_coeff * dist.log_prob(target).mean()
 
     def _log_ratio(self, td: TensorDictBase) -> tuple[torch.Tensor, Distribution]:

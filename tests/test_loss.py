@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import math
 from collections.abc import Iterator
 
 import pytest
@@ -391,6 +392,35 @@ def test_imitation_term_worked_example():
     assert loss(td)["loss_imitation"].item() == pytest.approx(expected.item(), rel=1e-6)
     with pytest.raises(ValueError, match="imitation_coeff"):
         loss.set_imitation_coeff(-1.0)
+
+
+def test_continuous_imitation_trains_the_mean_only():
+    """Worked example: a tanh-Gaussian with loc 0 and scale 0.5 and a teacher action tanh(1)
+    gives −log π = ½(1/0.5)² + log(0.5·√(2π)) + log(1 − tanh²(1)) per dimension; the gradient
+    reaches loc, −c_I (1 − 0)/0.5² per dimension, and not the scale."""
+    loc = torch.zeros(1, 2, requires_grad=True)
+    scale = torch.full((1, 2), 0.5, requires_grad=True)
+
+    class Params(nn.Module):
+        def forward(self, observation):
+            return loc.expand(observation.shape[0], 2), scale.expand(observation.shape[0], 2)
+
+    actor = ProbabilisticActor(TensorDictModule(Params(), ["observation"], ["loc", "scale"]),
+                               in_keys=["loc", "scale"], distribution_class=TanhNormal,
+                               return_log_prob=True)
+    _, critic, cost_critics = _networks()
+    loss = LagrangianPPOLoss(actor, critic, cost_critics)
+    g = torch.Generator().manual_seed(0)
+    td = _batch(actor, torch.zeros(_BATCH, 2), g)
+    td["teacher_action"] = torch.full((_BATCH, 2), math.tanh(1.0))
+    loss.set_imitation_coeff(0.5)
+    term = loss(td)["loss_imitation"]
+    per_dimension = 0.5 * (1.0 / 0.5) ** 2 + math.log(0.5 * math.sqrt(2 * math.pi)) \
+        + math.log(1.0 - math.tanh(1.0) ** 2)
+    assert term.item() == pytest.approx(0.5 * 2 * per_dimension, rel=1e-4)
+    term.backward()
+    assert scale.grad is None or torch.all(scale.grad == 0)
+    assert loc.grad == pytest.approx(torch.full((1, 2), -0.5 * (1.0 / 0.25)), rel=1e-4)
 
 
 def test_imitation_pulls_the_policy_towards_the_teacher():
