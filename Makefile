@@ -11,11 +11,11 @@ export PIP_DISABLE_PIP_VERSION_CHECK := 1
 
 TRAIN_ARGS ?=
 
-.PHONY: install train demo test test-slow lint pictures clean
+.PHONY: install train demo test test-slow lint pictures viewer-pictures clean
 
 install: $(STAMP)
 
-$(STAMP): pyproject.toml
+$(STAMP): pyproject.toml scripts/install-egl.sh
 	bash scripts/install-egl.sh
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip 2>&1 | grep -v "is ignored" || true
@@ -31,6 +31,15 @@ demo: $(STAMP)
 
 pictures: $(STAMP)
 	$(PY) -m crllk.pictures
+
+# the README's screenshots of the real rerun viewer, taken headless (about 3 minutes on 2 cores):
+# a follower recording on obstacle_loop at 9 s, and a short training run's live view at its end
+VIEWER_RECORDING := outputs/recordings/obstacle_loop_follower.rrd
+viewer-pictures: $(STAMP)
+	$(PY) -m crllk.record --task obstacle_loop --episodes 3 --horizon 150 --seed 1 --out $(VIEWER_RECORDING)
+	$(PY) -m crllk.screenshots $(VIEWER_RECORDING) --out docs/images --prefix viewer_recording --times 9
+	$(PY) -m crllk.screenshots --out docs/images --prefix viewer_live_training --train \
+		task=obstacle_loop obs=state seed=0 total_frames=40960 record_every=10 eval.every=0
 
 test: $(STAMP)
 	$(PY) -m pytest -q

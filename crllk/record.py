@@ -4,9 +4,10 @@
 
 :func:`record_episodes` plays episodes of sub-environment 0 of a
 :class:`~crllk.envs.BatchedLaneKeepingEnv` and logs them to a ``.rrd`` file and/or a live
-viewer. This is the only module of crllk that imports the rerun package: the map's lane and
-marking polylines come from :mod:`crllk.maps.markings` (numpy) and the viewer process
-(probing the port, running the ``rerun`` executable) from :mod:`crllk.viewer`.
+viewer. The rerun package is imported here and by the modules built on it
+(:mod:`crllk.live`, :mod:`crllk.screenshots`): the map's lane and marking polylines come from
+:mod:`crllk.maps.markings` (numpy) and the viewer process (probing the port, running the
+``rerun`` executable) from :mod:`crllk.viewer`.
 
 Timelines: ``step`` (control steps since the recording began), ``sim_time`` (simulated seconds
 since the recording began, ``step`` x control timestep), ``episode`` (index of the episode in
@@ -15,17 +16,21 @@ that files of one training run sharing a ``recording_id`` line up on it when ope
 
 Entity paths (:data:`ENTITY_PATHS`, plus :data:`ACTION_ENTITY_PATHS` for the env's action type
 and ``lagrange/<name>`` per multiplier): the map under ``world/map`` (static), the robot's pose
-``world/robot`` (one row per step) with its footprint and camera (a pinhole carrying the camera
-image), the trail of the current episode ``world/trail``, per-step scalars ``reward/...``,
-``cost/...``, ``lane_pose/...``, ``action/...``, ``lagrange/...``, per-episode scalars
-``episode/...`` and the text events ``events`` (episode starts, ends and their reasons).
-Per-step scalars are sent in columns every 30 steps and at each episode's end.
+``world/robot`` (one row per step) with its labelled footprint, heading arrow and camera (a
+pinhole in pixels carrying the camera image), the trail of the current episode
+``world/trail``, per-step scalars ``reward/...``, ``cost/...``, ``lane_pose/...``,
+``action/...``, ``lagrange/...``, per-episode scalars ``episode/...`` and the text events
+``events`` (episode starts, ends and their reasons).
+Per-step scalars are sent in columns every 30 steps and at each episode's end. The layout
+(:func:`make_blueprint`) travels with the recording.
 
 Viewers listen on 127.0.0.1 only. ``viewer="spawn"`` reuses a viewer already answering on
 ``127.0.0.1:VIEWER_PORT`` (start one with ``rerun --bind 127.0.0.1`` to watch a training run
 across recordings) or starts ``rerun --bind 127.0.0.1``; ``viewer="serve"`` hosts a gRPC server
-for ``rerun --connect`` while the recording runs. A viewer that cannot be reached, or that goes
-away, is a warning: the file is written all the same. A path that cannot be written raises
+for ``rerun --bind 127.0.0.1 --connect`` while the recording runs (without ``--bind``, even a
+connecting viewer listens on 0.0.0.0). A viewer that cannot be reached, or that goes away, is
+a warning in :attr:`RecordingReport.warnings` (a viewer that cannot be spawned, once per
+process): the file is written all the same. A path that cannot be written raises
 :class:`RecordingError` before the first step.
 """
 
@@ -35,7 +40,6 @@ import argparse
 import math
 import sys
 import time
-import warnings
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -65,7 +69,13 @@ from crllk.sim import constants as C
 from crllk.sim.physics import Physics
 from crllk.sim.texture import DECOR_RGB, ROAD_RGB, WHITE_RGB, WHITE_WIDTH, YELLOW_RGB
 from crllk.task_config import CameraConfig
-from crllk.viewer import VIEWER_HOST, VIEWER_PORT, check_port_free, spawn_viewer
+from crllk.viewer import (
+    VIEWER_HOST,
+    VIEWER_PORT,
+    check_port_free,
+    spawn_viewer,
+    viewer_listening,
+)
 
 if TYPE_CHECKING:
     from crllk.envs import BatchedLaneKeepingEnv
@@ -81,6 +91,7 @@ YELLOW_MARKINGS = "world/map/markings/yellow"
 OBJECTS = "world/map/objects"
 ROBOT = "world/robot"
 FOOTPRINT = "world/robot/footprint"
+HEADING = "world/robot/heading"
 CAMERA = "world/robot/camera"
 IMAGE = "world/robot/camera/image"
 TRAIL = "world/trail"
@@ -94,6 +105,8 @@ EPISODE_DISTANCE = "episode/distance"
 EPISODE_LANE_COST = "episode/lane_cost"
 EPISODE_COLLISIONS = "episode/collisions"
 EPISODE_LENGTH = "episode/length"
+CAMERA_VIEW = "robot camera"
+"""Name of the view of the camera image in the layouts (:func:`scene_views`)."""
 LAGRANGE_PREFIX = "lagrange/"
 """Multiplier ``name`` is logged at ``lagrange/<name>`` (``lagrange/lane``, ...)."""
 
@@ -101,7 +114,7 @@ MAP_ENTITY_PATHS = (TILES, LANES, WHITE_MARKINGS, YELLOW_MARKINGS, OBJECTS)
 STEP_ENTITY_PATHS = (ROBOT, IMAGE, TRAIL, REWARD, COST_LANE, COST_COLLISION, LATERAL,
                      HEADING_ERROR)
 EPISODE_ENTITY_PATHS = (EPISODE_DISTANCE, EPISODE_LANE_COST, EPISODE_COLLISIONS, EPISODE_LENGTH)
-ENTITY_PATHS = (*MAP_ENTITY_PATHS, FOOTPRINT, CAMERA, *STEP_ENTITY_PATHS, EVENTS,
+ENTITY_PATHS = (*MAP_ENTITY_PATHS, FOOTPRINT, HEADING, CAMERA, *STEP_ENTITY_PATHS, EVENTS,
                 *EPISODE_ENTITY_PATHS)
 """Every entity path a recording holds, whatever the action type and multipliers."""
 ACTION_ENTITY_PATHS = {"discrete": ("action/index",),
@@ -109,9 +122,16 @@ ACTION_ENTITY_PATHS = {"discrete": ("action/index",),
                        "duckietown": ("action/velocity", "action/steering"),
                        "duty": ("action/duty_left", "action/duty_right")}
 """The action's scalar paths per action type (discrete: 0 left, 1 right, 2 straight)."""
+_ACTION_NAMES = {"action/index": "action (0 left, 1 right, 2 straight)",
+                 "action/velocity": "velocity action [-1, 1]",
+                 "action/steering": "steering action [-1, 1]",
+                 "action/duty_left": "left wheel duty [-1, 1]",
+                 "action/duty_right": "right wheel duty [-1, 1]"}
 
 # ----- constants --------------------------------------------------------------------------
 VIEWERS = ("none", "spawn", "serve")
+_FAILED_VIEWERS: set[str] = set()
+"""Viewer modes that failed in this process and are not tried again (``"spawn"``)."""
 _TILE_THICKNESS = 0.002
 """Tiles are flat boxes this thick, top face at z = 0 (m)."""
 _SCALAR_BATCH = 30
@@ -119,13 +139,34 @@ _SCALAR_BATCH = 30
 of every episode."""
 _CAMERA_PLANE = 0.08
 """Distance of the camera image plane drawn in 3D from the camera (m)."""
+_HEADING_LENGTH = 0.2
+"""Length of the arrow drawn along the robot's heading, from its footprint's top (m)."""
+_ROBOT_LABEL = "robot"
+"""Label of the recorded robot (the map's own duckiebots are labelled ``duckiebot``)."""
 _LANE_RGB = (230, 40, 200)
 _TRAIL_RGB = (40, 170, 255)
-_ROBOT_RGB = (250, 215, 40)
+_ROBOT_RGB = (0, 230, 255)
+"""Cyan: no map object, tile or marking has this colour."""
+_EPISODE_MARKER_SIZE = 6.0
+"""Radius of the per-episode summary points in the plots (ui points)."""
+_EPISODE_HEADROOM = 1.2
+"""The per-episode plots reach this many times the largest value."""
+_CHASE_EYE = (-0.9, 0.0, 0.6)
+"""Eye of the chase view in the robot's frame (m): behind and above the robot."""
+_CHASE_TARGET = (0.4, 0.0, 0.0)
+"""Point the chase view looks at, in the robot's frame (m): ahead on the road."""
 _OBJECT_RGB = {"duckie": (250, 215, 40), "cone": (245, 105, 15), "barrier": (220, 30, 30),
                "duckiebot": (40, 40, 45), "bus": (240, 190, 25), "truck": (50, 100, 200),
                "tree": (50, 140, 50), "sign_blank": (235, 235, 235)}
 """Box colour of each object kind (the main colour of its parts in the MuJoCo scene)."""
+SERIES_NAMES = {REWARD: "progress (m)", COST_LANE: "lane cost (dm)",
+                COST_COLLISION: "collision cost", LATERAL: "lateral offset (m, + right)",
+                HEADING_ERROR: "heading error (rad)", EPISODE_DISTANCE: "episode distance (m)",
+                EPISODE_LANE_COST: "episode mean lane cost (dm)",
+                EPISODE_COLLISIONS: "episode collisions", EPISODE_LENGTH: "episode length (steps)"}
+"""Series names with units; actions and multipliers are named by :func:`series_name`."""
+_SERIES_RGB = {REWARD: (60, 180, 75), COST_LANE: (230, 25, 75), COST_COLLISION: (255, 99, 71),
+               LATERAL: (0, 130, 200), HEADING_ERROR: (245, 130, 48)}
 
 
 @dataclass(frozen=True)
@@ -172,6 +213,16 @@ def object_boxes(dmap: DuckietownMap) -> rr.Boxes3D:
         rotation_axis_angles=[rr.RotationAxisAngle(axis=(0, 0, 1), radians=o.yaw) for o in objs],
         colors=[_OBJECT_RGB.get(o.kind, (128, 128, 128)) for o in objs], fill_mode="solid",
         labels=[o.kind for o in objs])
+
+
+def focal_length(fovy_degrees: float, height: int) -> float:
+    """Focal length (px) of a pinhole camera with square pixels whose vertical field of view
+    is ``fovy_degrees`` over an image ``height`` pixels high: f = h / 2 / tan(fovy / 2).
+
+    The pinhole is given in pixels: rerun 0.41 replaces the resolution of a pinhole logged
+    with ``fov_y`` and ``aspect_ratio`` by ``[aspect_ratio, 1]``.
+    """
+    return 0.5 * height / math.tan(math.radians(fovy_degrees) / 2)
 
 
 # ----- recording --------------------------------------------------------------------------
@@ -244,6 +295,7 @@ class _Recorder:
                  iteration: int | None, multipliers: dict[str, float] | None) -> None:
         self.rec = rec
         self.dt = control_timestep
+        self.action_type = action_type
         self.action_paths = ACTION_ENTITY_PATHS[action_type]
         self.iteration = iteration
         self.multipliers = {LAGRANGE_PREFIX + name: float(value)
@@ -253,6 +305,13 @@ class _Recorder:
         self.trail: list[tuple[float, float, float]] = []
         self.scalars = _ScalarColumns(iteration)
         self.clock = _Clock()
+        self.episode_stats: list[EpisodeStats] = []
+
+    def blueprint(self) -> rrb.Blueprint:
+        """The layout for this recording's action type, multipliers and episodes so far."""
+        return make_blueprint(self.action_type,
+                              [path.removeprefix(LAGRANGE_PREFIX) for path in self.multipliers],
+                              episode_ranges(self.episode_stats) if self.episode_stats else None)
 
     def log_static(self, dmap: DuckietownMap, physics: Physics, camera: CameraConfig) -> None:
         """The map, the robot's footprint and camera, and the series' names and colours."""
@@ -272,36 +331,42 @@ class _Recorder:
         self._log_series_styles()
 
     def _log_robot_parts(self, physics: Physics) -> None:
-        """Footprint box and camera pose in the robot's frame, from the MuJoCo model."""
+        """Labelled footprint box, heading arrow and camera pose in the robot's frame (x
+        forward), from the MuJoCo model."""
         model = physics.named.model
-        self.rec.log(FOOTPRINT, rr.Boxes3D(centers=[model.geom_pos[C.FOOTPRINT_GEOM]],
-                                           half_sizes=[model.geom_size[C.FOOTPRINT_GEOM]],
-                                           colors=_ROBOT_RGB, fill_mode="solid"), static=True)
+        centre, half = model.geom_pos[C.FOOTPRINT_GEOM], model.geom_size[C.FOOTPRINT_GEOM]
+        self.rec.log(FOOTPRINT, rr.Boxes3D(centers=[centre], half_sizes=[half],
+                                           colors=_ROBOT_RGB, fill_mode="solid",
+                                           labels=_ROBOT_LABEL, show_labels=True), static=True)
+        self.rec.log(HEADING, rr.Arrows3D(origins=[(centre[0], 0.0, centre[2] + half[2])],
+                                          vectors=[(_HEADING_LENGTH, 0.0, 0.0)],
+                                          colors=_ROBOT_RGB, radii=0.012), static=True)
         w, x, y, z = model.cam_quat[C.CAMERA]
         self.rec.log(CAMERA, rr.Transform3D(translation=model.cam_pos[C.CAMERA],
                                             quaternion=rr.Quaternion(xyzw=[x, y, z, w])),
                      static=True)
 
     def _log_pinhole(self, camera: CameraConfig, fovy_degrees: float) -> None:
-        """The robot camera as a pinhole (MuJoCo cameras look along -z: right, up, back)."""
-        height, width = camera.height, camera.width
-        self.rec.log(CAMERA, rr.Pinhole(fov_y=math.radians(fovy_degrees),
-                                        aspect_ratio=width / height, resolution=[width, height],
+        """The robot camera as a pinhole in pixels (MuJoCo cameras look along -z: right, up,
+        back); see :func:`focal_length`."""
+        self.rec.log(CAMERA, rr.Pinhole(focal_length=focal_length(fovy_degrees, camera.height),
+                                        width=camera.width, height=camera.height,
                                         camera_xyz=rr.ViewCoordinates.RUB,
                                         image_plane_distance=_CAMERA_PLANE), static=True)
 
     def _log_series_styles(self) -> None:
-        styles = {REWARD: ("progress (m)", (60, 180, 75)), COST_LANE: ("lane cost (dm)",
-                  (230, 25, 75)), COST_COLLISION: ("collision cost", (128, 0, 0)),
-                  LATERAL: ("lateral offset (m, + right)", (0, 130, 200)),
-                  HEADING_ERROR: ("heading error (rad)", (245, 130, 48))}
-        for path, (name, colour) in styles.items():
-            self.rec.log(path, rr.SeriesLines(names=name, colors=colour), static=True)
-        for path in self.multipliers:
-            self.rec.log(path, rr.SeriesLines(names="λ_" + path.split("/")[-1]), static=True)
-        for path in (*self.action_paths, *EPISODE_ENTITY_PATHS):
-            self.rec.log(path, rr.SeriesPoints(names=path.split("/")[-1], marker_sizes=2.0),
+        """Names and colours of the series (:data:`SERIES_NAMES`); per-episode points large."""
+        for path, colour in _SERIES_RGB.items():
+            self.rec.log(path, rr.SeriesLines(names=SERIES_NAMES[path], colors=colour),
                          static=True)
+        for path in self.multipliers:
+            self.rec.log(path, rr.SeriesLines(names=series_name(path)), static=True)
+        for path in self.action_paths:
+            self.rec.log(path, rr.SeriesPoints(names=series_name(path), marker_sizes=2.0),
+                         static=True)
+        for path in EPISODE_ENTITY_PATHS:
+            self.rec.log(path, rr.SeriesPoints(names=SERIES_NAMES[path], markers="diamond",
+                                               marker_sizes=_EPISODE_MARKER_SIZE), static=True)
 
     def _set_time(self) -> None:
         self.rec.set_time("step", sequence=self.steps)
@@ -351,6 +416,7 @@ class _Recorder:
                             (EPISODE_COLLISIONS, stats.collisions),
                             (EPISODE_LENGTH, stats.length)):
             self.rec.log(path, rr.Scalars(float(value)))
+        self.episode_stats.append(stats)
         self.episode += 1
 
     def finish(self) -> str | None:
@@ -359,6 +425,8 @@ class _Recorder:
         self.scalars.send(self.rec)
         problem = None
         try:
+            if self.episode_stats:  # the same layout, with the episode plots' ranges
+                self.rec.send_blueprint(self.blueprint(), make_active=False, make_default=True)
             self.rec.flush()
         except RuntimeError as err:
             problem = str(err)
@@ -366,24 +434,79 @@ class _Recorder:
         return problem
 
 
-def make_blueprint(action_type: str = "discrete", with_multipliers: bool = True) -> rrb.Blueprint:
-    """3D view and event log on the left; camera and time series on the right."""
-    series = [rrb.TimeSeriesView(origin="/", contents=["cost/**", "reward/**"],
-                                 name="costs and reward"),
-              rrb.TimeSeriesView(origin="lane_pose", name="lane pose"),
-              rrb.TimeSeriesView(origin="action", name=f"action ({action_type})")]
-    if with_multipliers:
-        series.append(rrb.TimeSeriesView(origin="lagrange", name="Lagrange multipliers"))
-    series.append(rrb.TimeSeriesView(origin="episode", name="episodes"))
+def series_name(path: str) -> str:
+    """The name of the scalar series at ``path``, as its plot shows it."""
+    if path.startswith(LAGRANGE_PREFIX):
+        return "λ_" + path.removeprefix(LAGRANGE_PREFIX)
+    return SERIES_NAMES.get(path) or _ACTION_NAMES.get(path, path)
+
+
+def _plots(paths: Sequence[str], ranges: dict[str, tuple[float, float]] | None = None
+           ) -> list[rrb.TimeSeriesView]:
+    """One plot per series, so that each gets an axis of its own scale (``ranges``: fixed y
+    ranges by path); time axes linked, zooming one zooms all."""
+    ranges = ranges or {}
+    return [rrb.TimeSeriesView(
+        origin=path, name=series_name(path), plot_legend=rrb.PlotLegend(visible=False),
+        axis_x=rrb.TimeAxis(link="LinkToGlobal"),
+        axis_y=rrb.ScalarAxis(range=ranges[path]) if path in ranges else None)
+        for path in paths]
+
+
+def episode_ranges(stats: Sequence[EpisodeStats]) -> dict[str, tuple[float, float]]:
+    """y ranges of the per-episode plots, from :data:`_EPISODE_HEADROOM` times the smallest
+    value (or 0) to as much times the largest (or 1), so that no point sits on an edge."""
+    values = {EPISODE_DISTANCE: [s.distance for s in stats],
+              EPISODE_LANE_COST: [s.lane_cost for s in stats],
+              EPISODE_COLLISIONS: [s.collisions for s in stats],
+              EPISODE_LENGTH: [s.length for s in stats]}
+    ranges = {}
+    for path, column in values.items():
+        low, high = (_EPISODE_HEADROOM * f([*column, 0.0]) for f in (min, max))
+        ranges[path] = (low, high if high > low else low + 1.0)
+    return ranges
+
+
+def scene_views() -> rrb.Vertical:
+    """The whole map in 3D, a chase view riding behind the robot beside the robot camera, and
+    the event log."""
+    chase = rrb.Spatial3DView(origin=ROBOT, contents="/world/**", name="chase view",
+                              eye_controls=rrb.EyeControls3D(
+                                  position=_CHASE_EYE, look_target=_CHASE_TARGET,
+                                  eye_up=(0.0, 0.0, 1.0)))
+    return rrb.Vertical(
+        rrb.Spatial3DView(origin="world", name="map"),
+        rrb.Horizontal(chase, rrb.Spatial2DView(origin=CAMERA, name=CAMERA_VIEW)),
+        rrb.TextLogView(origin=EVENTS, name="events"), row_shares=[5, 4, 2])
+
+
+def make_blueprint(action_type: str = "discrete", multipliers: Sequence[str] = (),
+                   ranges: dict[str, tuple[float, float]] | None = None) -> rrb.Blueprint:
+    """The review layout: the whole map, a chase view riding with the robot, the camera and
+    the event log on the left; on the right one plot per step signal, one per episode
+    summary and a table of the episodes (one row each, on the ``episode`` timeline).
+
+    Args:
+        action_type: selects the action plots (:data:`ACTION_ENTITY_PATHS`).
+        multipliers: constraint names with a ``lagrange/<name>`` plot each.
+        ranges: fixed y ranges of plots by path (:func:`episode_ranges`).
+    """
+    step_paths = [REWARD, COST_LANE, COST_COLLISION, LATERAL, HEADING_ERROR,
+                  *ACTION_ENTITY_PATHS[action_type],
+                  *(LAGRANGE_PREFIX + name for name in multipliers)]
+    table = rrb.DataframeView(origin="episode", name="episodes", query=rrb.archetypes.
+                              DataframeQuery(timeline="episode", select=[
+                                  "episode", *(rrb.components.ComponentColumnSelector(
+                                      entity_path=path, component="Scalars:scalars")
+                                      for path in EPISODE_ENTITY_PATHS)]))
+    right = rrb.Vertical(
+        rrb.Grid(*_plots(step_paths), grid_columns=2),
+        rrb.Grid(*_plots(EPISODE_ENTITY_PATHS, ranges), grid_columns=2), table,
+        row_shares=[8, 4, 3])
     return rrb.Blueprint(
-        rrb.Horizontal(
-            rrb.Vertical(rrb.Spatial3DView(origin="world", name="map"),
-                         rrb.TextLogView(origin=EVENTS, name="events"), row_shares=[4, 1]),
-            rrb.Vertical(rrb.Spatial2DView(origin=CAMERA, name="robot camera"),
-                         rrb.Vertical(*series), row_shares=[1, 3]),
-            column_shares=[3, 2]),
+        rrb.Horizontal(scene_views(), right, column_shares=[1, 1]),
         rrb.BlueprintPanel(state="collapsed"), rrb.SelectionPanel(state="collapsed"),
-        rrb.TimePanel(timeline="sim_time", state="expanded"))
+        rrb.TimePanel(timeline="sim_time", state="collapsed"))
 
 
 # ----- sinks ------------------------------------------------------------------------------
@@ -406,11 +529,17 @@ def check_writable(path: str | Path) -> Path:
 
 def _open_sinks(path: Path | None, viewer: str, problems: list[str]
                 ) -> tuple[list, str | None]:
-    """The sinks for ``path`` and ``viewer``; an unreachable viewer becomes a warning."""
+    """The sinks for ``path`` and ``viewer``; an unreachable viewer becomes a warning.
+
+    A viewer that could not be spawned is reported once per process: later recordings only
+    reuse a viewer that answers by then (started by hand), and say nothing otherwise.
+    """
     sinks: list = [rr.FileSink(path)] if path is not None else []
     url = None
     try:
         if viewer == "spawn":
+            if "spawn" in _FAILED_VIEWERS and not viewer_listening(VIEWER_PORT):
+                return sinks, None
             url = spawn_viewer(VIEWER_PORT)
             sinks.append(rr.GrpcSink(url))
         elif viewer == "serve":
@@ -419,9 +548,12 @@ def _open_sinks(path: Path | None, viewer: str, problems: list[str]
             url = server.uri
             sinks.append(server)
     except Exception as err:  # any viewer failure must not stop the recording
-        problems.append(f"rerun viewer ({viewer}) unavailable, "
-                        f"{'writing only ' + str(path) if path else 'nothing recorded'}: {err}")
-        warnings.warn(problems[-1], RuntimeWarning, stacklevel=3)
+        if viewer not in _FAILED_VIEWERS:
+            problems.append(f"rerun viewer ({viewer}) unavailable, "
+                            f"{'writing only ' + str(path) if path else 'nothing recorded'}: "
+                            f"{err}")
+        if viewer == "spawn":
+            _FAILED_VIEWERS.add(viewer)
     return sinks, url
 
 
@@ -495,7 +627,7 @@ def record_episodes(env: BatchedLaneKeepingEnv, policy: Policy, episodes: int,
         deterministic: take the policy's mode instead of sampling.
         viewer: ``"none"`` (file only), ``"spawn"`` (start or reuse a native viewer on
             127.0.0.1:``VIEWER_PORT``) or ``"serve"`` (a gRPC server on 127.0.0.1 for
-            ``rerun --connect``, alive while recording).
+            ``rerun --bind 127.0.0.1 --connect``, alive while recording).
         iteration: the training iteration, logged on the ``iteration`` timeline.
         multipliers: Lagrange multipliers by constraint name (``{"lane": .., "collision":
             ..}``), logged as ``lagrange/<name>`` every step.
@@ -518,8 +650,7 @@ def record_episodes(env: BatchedLaneKeepingEnv, policy: Policy, episodes: int,
     exploration = ExplorationType.DETERMINISTIC if deterministic else ExplorationType.RANDOM
     try:
         with recorder.clock:
-            recorder.rec.set_sinks(*sinks, default_blueprint=make_blueprint(
-                env.action_type, with_multipliers=bool(multipliers)))
+            recorder.rec.set_sinks(*sinks, default_blueprint=recorder.blueprint())
             recorder.log_static(env.config.map, env.physics[0], env.config.camera)
         with torch.no_grad(), set_exploration_type(exploration):
             stats = _play(env, policy, episodes, recorder, render_clock)
@@ -547,7 +678,6 @@ def _flush_failed(problem: str, file: Path | None, viewer: str, problems: list[s
         raise RecordingError(file, problem)
     problems.append(f"rerun viewer ({viewer}) lost while recording"
                     f"{', the file is complete' if file else ''}: {problem}")
-    warnings.warn(problems[-1], RuntimeWarning, stacklevel=3)
 
 
 # ----- reading back -----------------------------------------------------------------------
@@ -586,6 +716,8 @@ def _unrecorded_seconds(args: argparse.Namespace) -> float:
 
 
 def _print_report(report: RecordingReport, wall: float) -> None:
+    for message in report.warnings:
+        print(f"warning: {message}", file=sys.stderr, flush=True)
     for stats in report.episode_stats:
         print(f"episode: {stats.length} steps, {stats.distance:.2f} m, lane cost "
               f"{stats.lane_cost:.3f} dm, collisions {stats.collisions:g}")
@@ -622,9 +754,10 @@ def main(argv: Sequence[str] | None = None) -> None:
         print(f"unrecorded: {_unrecorded_seconds(args):.2f} s wall")
 
 
-__all__ = ["ACTION_ENTITY_PATHS", "ENTITY_PATHS", "VIEWERS", "FollowerPolicy", "RecordingError",
-           "RecordingReport", "check_writable", "make_blueprint", "read_recording",
-           "record_episodes", "spawn_viewer"]
+__all__ = ["ACTION_ENTITY_PATHS", "ENTITY_PATHS", "SERIES_NAMES", "VIEWERS", "FollowerPolicy",
+           "RecordingError", "RecordingReport", "check_writable", "episode_ranges",
+           "focal_length", "make_blueprint", "read_recording", "record_episodes", "scene_views",
+           "series_name", "spawn_viewer"]
 
 
 if __name__ == "__main__":

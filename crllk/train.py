@@ -8,7 +8,9 @@ One iteration of the main loop (:func:`train`):
    advantage (A_r − Σλ_i A_ci) / (1 + Σλ_i);
 4. append a row to ``metrics.csv``; every ``checkpoint_every`` iterations (and at the end)
    write ``checkpoints/last.pt`` atomically; every ``eval.every`` iterations append a
-   evaluation to ``eval.csv`` (the same episodes as ``python -m crllk.evaluate``).
+   evaluation to ``eval.csv`` (the same episodes as ``python -m crllk.evaluate``); every
+   ``record_every`` iterations record one evaluation episode with rerun; with ``live`` send
+   the row and the recordings to the run's live view (:mod:`crllk.live`).
 
 The checkpoint holds the networks, the optimiser, the multipliers, the counters, the random
 generators, the simulations' full state and the running episode sums, so ``resume=true``
@@ -26,7 +28,7 @@ import time
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import hydra
 import torch
@@ -50,11 +52,14 @@ from crllk.models import ModelConfig, make_actor, make_critic, make_shared_criti
 from crllk.paths import task_file, task_names
 from crllk.train_config import TrainConfig, validate
 
+if TYPE_CHECKING:
+    from crllk.live import LiveView
+
 COSTS = ("lane", "collision")
 """Constraint names; cost ``c`` is read from ``("next", "cost_<c>")``."""
 DISCRETE_ACTION_NAMES = ("left", "right", "straight")
 RESUME_KEEPS = ("total_frames", "progress", "threads", "checkpoint_every", "record_every",
-                "viewer")
+                "viewer", "live", "live_port")
 """Settings a resumed run takes from the command line; all others come from its config.yaml."""
 SOURCE_RUN = "run"
 """How errors about the run directory name their source."""
@@ -317,6 +322,7 @@ def train(config: TrainConfig) -> Path:
         atomic_write_text(run_dir / "config.yaml", OmegaConf.to_yaml(OmegaConf.structured(config)))
         carry = env.reset()
         print(f"run directory: {run_dir}", flush=True)
+    live = open_live_view(config, run_dir)
 
     bar = tqdm(total=config.total_frames, initial=frames, unit="frame", dynamic_ncols=True,
                disable=not config.progress, file=sys.stderr)
@@ -346,6 +352,8 @@ def train(config: TrainConfig) -> Path:
                "lambda_collision": multipliers["collision"].value,
                **losses, **action_columns(batch, config.action.name)}
         metrics.append(row)
+        if live is not None:
+            live.log_iteration(row)
         bar.update(batch.numel())
         bar.set_postfix_str(progress_text(row), refresh=False)
 
@@ -358,12 +366,16 @@ def train(config: TrainConfig) -> Path:
         if config.record_every and iteration % config.record_every == 0:
             if record_env is None:
                 record_env = build_env(config, num_envs=1, seed=config.eval.seed)
-            record_iteration(config, record_env, learner, multipliers, iteration)
+            recording = record_iteration(config, record_env, learner, multipliers, iteration)
+            if live is not None and recording is not None:
+                live.add_recording(recording)
         if iteration % config.checkpoint_every == 0 or frames >= config.total_frames:
             save_checkpoint(checkpoint_path, checkpoint_state(
                 config, learner, multipliers, episodes, env, generator, carry,
                 iteration=iteration, frames=frames, elapsed=time.perf_counter() - started))
     bar.close()
+    if live is not None:
+        live.close()
     env.close()
     for extra_env in (eval_env, record_env):
         if extra_env is not None:
@@ -434,12 +446,31 @@ def evaluate(config: TrainConfig, env: BatchedLaneKeepingEnv, learner: Learner, 
             "evaluation_s": time.perf_counter() - began}
 
 
+def open_live_view(config: TrainConfig, run_dir: Path) -> LiveView | None:
+    """The run's live view (``live``), or None; rerun is imported only when it is on. A live
+    view that cannot start is a warning: training goes on."""
+    if config.live == "none":
+        return None
+    from crllk.live import live_url, open_live
+
+    live, problems = open_live(config.live, config.live_port, f"crllk-live-{run_dir.resolve()}",
+                               {"J_clane": config.algo.lane.threshold,
+                                "J_coll": config.algo.collision.threshold})
+    for message in problems:
+        print(f"warning: {message}", file=sys.stderr, flush=True)
+    if live is not None:
+        print(f"live view: rerun --bind 127.0.0.1 --connect {live_url(config.live_port)}",
+              flush=True)
+    return live
+
+
 def record_iteration(config: TrainConfig, env: BatchedLaneKeepingEnv, learner: Learner,
-                     multipliers: dict[str, Multiplier], iteration: int) -> None:
+                     multipliers: dict[str, Multiplier], iteration: int) -> Path | None:
     """Records one deterministic evaluation episode to
-    ``<run_dir>/recordings/iteration_<iteration>.rrd`` (and the live viewer, if any). Files of
-    one run share a recording id, so opened together they line up on the ``iteration``
-    timeline. A recording that fails is a warning: training goes on."""
+    ``<run_dir>/recordings/iteration_<iteration>.rrd`` (and the viewer of ``viewer``, if any)
+    and returns its path. Files of one run share a recording id, so opened together they line
+    up on the ``iteration`` timeline. A recording that fails is a warning (and None): training
+    goes on."""
     from crllk.record import record_episodes  # rerun is imported only when recording
 
     run_dir = config.resolved_run_dir()
@@ -453,9 +484,10 @@ def record_iteration(config: TrainConfig, env: BatchedLaneKeepingEnv, learner: L
     except Exception as err:  # a recording never ends a training run
         print(f"warning: recording at iteration {iteration} failed: {err}", file=sys.stderr,
               flush=True)
-        return
+        return None
     for message in report.warnings:
         print(f"warning: {message}", file=sys.stderr, flush=True)
+    return path
 
 
 # ----- checkpoints -------------------------------------------------------------------------

@@ -116,6 +116,8 @@ class TrainConfig:
     progress: bool = True
     record_every: int = 0
     viewer: str = "none"
+    live: str = "none"
+    live_port: int = 9877
     ppo: PPOConfig = field(default_factory=PPOConfig)
     model: ModelSchema = field(default_factory=ModelSchema)
     eval: EvalConfig = field(default_factory=EvalConfig)
@@ -157,6 +159,7 @@ _CHOICES = {
     "model.encoder": ("fast", "original"),
     "model.critic_input": ("observation", "state"),
     "viewer": ("none", "spawn", "serve"),
+    "live": ("none", "serve", "spawn"),
 }
 _POSITIVE = ("total_frames", "num_envs", "rollout_steps", "threads", "checkpoint_every",
              "ppo.epochs", "ppo.minibatch_size", "ppo.lr", "ppo.max_grad_norm",
@@ -169,6 +172,8 @@ _NON_NEGATIVE = ("seed", "eval.every", "teacher.coeff", "teacher.frames",
                  "algo.collision.threshold", "algo.collision.initial", "algo.collision.kp",
                  "algo.collision.kd", "action.baseline_collision_weight")
 _UNIT_INTERVAL = ("ppo.gamma", "ppo.gae_lambda", "encounters")
+_PORTS = 65536
+"""TCP ports are 1 ... 65535."""
 
 
 def validate(cfg: DictConfig | dict[str, Any]) -> TrainConfig:
@@ -204,6 +209,12 @@ def validate(cfg: DictConfig | dict[str, Any]) -> TrainConfig:
             raise ConfigError(SOURCE, f"algo.{name}.max_value",
                               f"must be >= algo.{name}.initial ({constraint.initial}), "
                               f"got {constraint.max_value}")
+    if not 0 < config.live_port < _PORTS:
+        raise ConfigError(SOURCE, "live_port", f"must lie in [1, {_PORTS - 1}], got "
+                          f"{config.live_port}")
+    if config.live != "none" and config.viewer != "none":
+        raise ConfigError(SOURCE, "viewer", f"must be none with live={config.live} (the live "
+                          f"view already shows the recordings), got {config.viewer!r}")
     if config.task_file and not Path(config.task_file).exists():
         raise ConfigError(SOURCE, "task_file", f"no such file: {config.task_file}")
     return config

@@ -3,6 +3,8 @@ checked against an unrecorded replay; failures of the file and of the viewer."""
 
 from __future__ import annotations
 
+import math
+import re
 import socket
 from pathlib import Path
 
@@ -25,7 +27,8 @@ from crllk.record import (
     read_recording,
     record_episodes,
 )
-from crllk.recording_picture import draw_recording, positions, scalars, series
+from crllk.recording_picture import draw_recording, positions, scalars, series, static_value
+from crllk.sim import constants as C
 
 HORIZON = 30
 EPISODES = 2
@@ -94,6 +97,65 @@ def test_recording_holds_every_entity_and_one_pose_per_step(recorded):
     assert reader.blueprints()  # the layout travels with the file
 
 
+def test_camera_pinhole_is_in_pixels_of_the_image(recorded):
+    """Read back, the pinhole's resolution is the image's [width, height] (px) and its focal
+    length gives the MuJoCo camera's vertical field of view over the image's height."""
+    _, chunks, _ = recorded
+    env = _env(1)
+    camera = env.config.camera
+    fovy = math.radians(float(env.physics[0].named.model.cam_fovy[C.CAMERA]))
+    env.close()
+    pinhole = chunks["world/robot/camera"]
+    assert static_value(pinhole, "Pinhole:resolution") == [[camera.width, camera.height]]
+    columns = static_value(pinhole, "Pinhole:image_from_camera")[0]  # column-major
+    matrix = np.asarray(columns).reshape(3, 3).T
+    assert matrix[0, 0] == pytest.approx(matrix[1, 1])  # square pixels
+    assert 2 * math.atan(0.5 * camera.height / matrix[1, 1]) == pytest.approx(fovy)
+    assert matrix[:2, 2].tolist() == pytest.approx([camera.width / 2, camera.height / 2])
+    frame = series(chunks["world/robot/camera/image"], "Image:format").values[0][0]
+    assert (frame["width"], frame["height"]) == (camera.width, camera.height)
+
+
+def test_robot_is_labelled_and_coloured_apart_from_the_objects(recorded):
+    _, chunks, _ = recorded
+    footprint = chunks["world/robot/footprint"]
+    assert static_value(footprint, "Boxes3D:labels") == ["robot"]
+    object_colours = set(static_value(chunks["world/map/objects"], "Boxes3D:colors"))
+    assert not set(static_value(footprint, "Boxes3D:colors")) & object_colours
+    assert static_value(chunks["world/robot/heading"], "Arrows3D:vectors")[0][0] > 0  # forward
+
+
+def _views(container) -> list:
+    """The views of a blueprint container, depth first."""
+    if hasattr(container, "class_identifier"):
+        return [container]
+    return [view for item in container.contents for view in _views(item)]
+
+
+def test_blueprint_gives_every_series_its_own_plot_and_a_chase_view():
+    blueprint = record.make_blueprint("continuous", ["lane", "collision"])
+    views = _views(blueprint.root_container)
+    plots = [v.origin for v in views if v.class_identifier == "TimeSeries"]
+    assert sorted(plots) == sorted(
+        ["reward/progress", "cost/lane", "cost/collision", "lane_pose/lateral",
+         "lane_pose/heading_error", "action/velocity", "action/steering", "lagrange/lane",
+         "lagrange/collision", "episode/distance", "episode/lane_cost", "episode/collisions",
+         "episode/length"])
+    chase = [v for v in views if v.class_identifier == "3D" and v.origin == "world/robot"]
+    assert len(chase) == 1  # the eye rides in the robot's frame
+    assert {"TextLog", "Dataframe", "2D"} <= {v.class_identifier for v in views}
+
+
+def test_episode_plot_ranges_keep_points_off_the_edges():
+    stats = [record.EpisodeStats(0, -0.5, 0.2, 1.0, 48, False),
+             record.EpisodeStats(0, 2.0, 0.0, 0.0, 150, True)]
+    ranges = record.episode_ranges(stats)
+    assert ranges["episode/distance"] == pytest.approx((-0.6, 2.4))
+    assert ranges["episode/length"] == pytest.approx((0.0, 180.0))
+    assert record.episode_ranges([record.EpisodeStats(0, 0.0, 0.0, 0.0, 0, True)])[
+        "episode/collisions"] == (0.0, 1.0)
+
+
 def test_recording_logs_episode_boundaries_and_statistics(recorded):
     report, chunks, _ = recorded
     texts = [t[0] for t in series(chunks["events"], "TextLog:text").values]
@@ -157,18 +219,31 @@ def _free_port() -> int:
         return probe.getsockname()[1]
 
 
-def test_unreachable_viewer_warns_and_still_writes_the_file(tmp_path, monkeypatch):
-    """No ``rerun`` on PATH and no display: the viewer cannot run, the file is written."""
+def test_unreachable_viewer_is_reported_once_and_the_files_are_written(tmp_path, monkeypatch):
+    """No ``rerun`` on PATH and no display: the viewer cannot run, the files are written; the
+    failure is reported by the first recording of the process only, and not tried again."""
     monkeypatch.setenv("PATH", "")
     for name in ("DISPLAY", "WAYLAND_DISPLAY", "WAYLAND_SOCKET"):
         monkeypatch.delenv(name, raising=False)
     monkeypatch.setattr(record, "VIEWER_PORT", _free_port())
+    monkeypatch.setattr(record, "_FAILED_VIEWERS", set())
+    attempts = []
+    spawn_viewer = record.spawn_viewer
+
+    def spawn(port):
+        attempts.append(port)
+        return spawn_viewer(port)
+
+    monkeypatch.setattr(record, "spawn_viewer", spawn)
     env = _env(1)
-    with pytest.warns(RuntimeWarning, match=r"rerun viewer \(spawn\) unavailable"):
-        report = record_episodes(env, _actor(env), 1, tmp_path / "v.rrd", viewer="spawn")
+    reports = [record_episodes(env, _actor(env), 1, tmp_path / f"v{k}.rrd", viewer="spawn")
+               for k in range(2)]
     env.close()
-    assert len(report.warnings) == 1 and report.steps == HORIZON
-    assert len(positions(read_recording(tmp_path / "v.rrd")).values) == HORIZON
+    assert [len(r.warnings) for r in reports] == [1, 0] and len(attempts) == 1
+    assert "rerun viewer (spawn) unavailable" in reports[0].warnings[0]
+    for k, report in enumerate(reports):
+        assert report.steps == HORIZON
+        assert len(positions(read_recording(tmp_path / f"v{k}.rrd")).values) == HORIZON
 
 
 def _listening_addresses(port: int) -> set[str]:
@@ -202,6 +277,15 @@ def test_served_recording_listens_on_localhost_only(tmp_path, monkeypatch):
     assert seen == [{"127.0.0.1"}]
     assert report.viewer_url == f"rerun+http://127.0.0.1:{port}/proxy"
     assert report.warnings == ()
+
+
+def test_every_rerun_command_in_the_readme_binds_to_localhost():
+    """Without ``--bind`` the viewer, even one that only connects, listens on 0.0.0.0."""
+    text = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+    commands = re.findall(r"^rerun .*$", text, flags=re.MULTILINE)  # code blocks
+    commands += re.findall(r"`(rerun [^`]*)`", " ".join(text.split()))  # inline, unwrapped
+    assert commands
+    assert all("--bind 127.0.0.1" in command for command in commands), commands
 
 
 def test_markings_lie_on_the_road():
