@@ -233,12 +233,21 @@ class BatchedLaneKeepingEnv(EnvBase):
                             [o.cost_collision for o in outcomes]], dtype=np.float32)
         reward, cost_lane, cost_collision = torch.from_numpy(rewards[:, :, None])
         terminated = np.array([[o.termination is not None] for o in outcomes])
-        truncated = (self.step_counts >= self.config.horizon)[:, None] & ~terminated
+        truncated = (self.step_counts >= self._horizons())[:, None] & ~terminated
         return {**self._observation_entries(), "reward": reward, "cost_lane": cost_lane,
                 "cost_collision": cost_collision,
                 "terminated": torch.from_numpy(terminated),
                 "truncated": torch.from_numpy(truncated),
                 "done": torch.from_numpy(terminated | truncated)}
+
+    def _horizons(self) -> np.ndarray:
+        """Each sub-environment's time limit (steps): ``spawn.encounter_horizon`` for an
+        episode that started in front of an obstacle, when set, else the task's horizon."""
+        horizon, short = self.config.horizon, self.config.spawn.encounter_horizon
+        if not short:
+            return np.full(len(self.tasks), horizon)
+        return np.array([min(short, horizon) if task.encounter else horizon
+                         for task in self.tasks])
 
     def _tensordict(self, entries: dict[str, torch.Tensor]) -> TensorDict:
         """``entries`` on the env's device (set, so TorchRL need not move them again)."""

@@ -39,6 +39,10 @@ class SpawnConfig:
     encounter_lateral_offset: tuple[float, float] = (-0.25, 0.04)
     """Range of such a start's offset from the lane centre (m, positive right): wider than
     ``lateral_offset``, so that some starts are already beside the obstacle's left side."""
+    encounter_horizon: int = 0
+    """Control steps after which an episode that started in front of an obstacle is truncated
+    (a positive number; unset, 0: the task's ``horizon``), so that training frames go to
+    passing obstacles. Applies to the batched environment (:mod:`crllk.envs`)."""
 
 
 @dataclass(frozen=True)

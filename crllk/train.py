@@ -88,6 +88,8 @@ def build_env(config: TrainConfig, *, num_envs: int, seed: int,
     overrides = config.task_overrides()
     if training and config.encounters > 0:
         spawn = {**overrides.get("spawn", {}), "encounters": config.encounters}
+        if config.encounter_horizon:
+            spawn["encounter_horizon"] = config.encounter_horizon
         overrides = {**overrides, "spawn": spawn}
     return make_env(config.task_source(), num_envs=num_envs, observation=config.obs.name,
                     action=config.action.name, seed=seed, overrides=overrides,

@@ -111,6 +111,7 @@ class TrainConfig:
     reward_scale: float = 30.0
     absorbing_off_road: bool = False
     encounters: float = 0.0
+    encounter_horizon: int = 0
     threads: int = 1
     checkpoint_every: int = 10
     progress: bool = True
@@ -165,7 +166,7 @@ _POSITIVE = ("total_frames", "num_envs", "rollout_steps", "threads", "checkpoint
              "ppo.epochs", "ppo.minibatch_size", "ppo.lr", "ppo.max_grad_norm",
              "model.hidden", "model.feature_dim", "eval.episodes", "eval.num_envs",
              "algo.lane.step_size", "algo.collision.step_size", "reward_scale")
-_NON_NEGATIVE = ("seed", "eval.every", "teacher.coeff", "teacher.frames",
+_NON_NEGATIVE = ("seed", "encounter_horizon", "eval.every", "teacher.coeff", "teacher.frames",
                  "teacher.final", "record_every", "eval.seed", "ppo.entropy_coeff",
                  "ppo.critic_coeff",
                  "algo.lane.threshold", "algo.lane.initial", "algo.lane.kp", "algo.lane.kd",

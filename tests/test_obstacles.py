@@ -7,6 +7,7 @@ import math
 
 import numpy as np
 import pytest
+import torch
 
 import crllk
 from crllk.errors import ConfigError
@@ -165,6 +166,25 @@ def test_encounter_spawns_start_before_a_blocking_obstacle():
 def test_encounter_probability_is_checked():
     with pytest.raises(ConfigError, match=r"spawn.encounters.*\[0, 1\]"):
         crllk.load("obstacle_loop", observation="state", overrides={"spawn": {"encounters": 1.5}})
+
+
+def test_encounter_episodes_are_truncated_at_their_own_horizon():
+    """With spawn.encounter_horizon = 20, encounter episodes are truncated (not terminated)
+    after 20 steps and the others run on; a value set must be positive."""
+    env = crllk.make_env("obstacle_loop", num_envs=8, observation="state", action="duty",
+                         seed=3, overrides={"spawn": {"encounters": 0.5, "encounter_horizon": 20}})
+    td = env.reset()
+    encounter = td["encounter"].reshape(-1).numpy().copy()
+    assert 0 < encounter.sum() < 8
+    td["action"] = torch.zeros(8, 2)  # standing still: nothing ends the episodes but time
+    for _ in range(20):
+        td = env.step(td)["next"]
+        td["action"] = torch.zeros(8, 2)
+    assert td["truncated"].reshape(-1).numpy().tolist() == encounter.tolist()
+    assert not td["terminated"].any()
+    with pytest.raises(ConfigError, match=r"spawn.encounter_horizon: must be positive, got -1"):
+        crllk.load("obstacle_loop", observation="state",
+                   overrides={"spawn": {"encounter_horizon": -1}})
 
 
 def test_encounter_share_and_flag_in_the_batched_env():
