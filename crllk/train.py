@@ -233,6 +233,16 @@ def imitation_coeff(config: TrainConfig, frames: int) -> float:
     return teacher.coeff + fraction * (teacher.final - teacher.coeff)
 
 
+def learning_rate(config: TrainConfig, frames: int) -> float:
+    """Adam's learning rate after ``frames``: ``ppo.lr``, or with ``ppo.anneal_lr`` falling
+    linearly from it to ``ppo.lr × ppo.lr_final_fraction`` at ``total_frames``."""
+    ppo = config.ppo
+    if not ppo.anneal_lr:
+        return ppo.lr
+    fraction = min(frames / config.total_frames, 1.0)
+    return ppo.lr * (1.0 - fraction * (1.0 - ppo.lr_final_fraction))
+
+
 def update_multipliers(multipliers: dict[str, Multiplier],
                        episodes: Sequence[EpisodeStats]) -> None:
     """Dual ascent from the finished episodes of the task's own spawn distribution (episodes
@@ -336,6 +346,8 @@ def train(config: TrainConfig) -> Path:
         update_multipliers(multipliers, finished)
         learner.loss.set_multipliers([multipliers[c].value for c in COSTS])
         learner.loss.set_imitation_coeff(imitation_coeff(config, frames))
+        for group in learner.optimizer.param_groups:
+            group["lr"] = learning_rate(config, frames)
         env.teacher_active = imitation_coeff(config, frames + batch.numel()) > 0
         shape_signals(batch, config, env.config.off_road_lane_cost)
         losses = ppo_update(learner, batch, config, generator)

@@ -63,6 +63,8 @@ class PPOConfig:
     epochs: int = 10
     minibatch_size: int = 512
     lr: float = 1e-3
+    anneal_lr: bool = False
+    lr_final_fraction: float = 0.0
     max_grad_norm: float = 1.0
     entropy_coeff: float = 0.01
     critic_coeff: float = 0.5
@@ -172,7 +174,7 @@ _NON_NEGATIVE = ("seed", "encounter_horizon", "eval.every", "teacher.coeff", "te
                  "algo.lane.threshold", "algo.lane.initial", "algo.lane.kp", "algo.lane.kd",
                  "algo.collision.threshold", "algo.collision.initial", "algo.collision.kp",
                  "algo.collision.kd", "action.baseline_collision_weight")
-_UNIT_INTERVAL = ("ppo.gamma", "ppo.gae_lambda", "encounters")
+_UNIT_INTERVAL = ("ppo.gamma", "ppo.gae_lambda", "ppo.lr_final_fraction", "encounters")
 _PORTS = 65536
 """TCP ports are 1 ... 65535."""
 

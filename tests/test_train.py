@@ -15,6 +15,7 @@ import torch
 from tiny_runs import FRAMES_PER_ITERATION, NUM_ENVS, TINY, compose_config, run_in_process
 
 from crllk.checkpoint import load_checkpoint
+from crllk.errors import ConfigError
 from crllk.train_config import validate
 
 REPO = Path(__file__).resolve().parents[1]
@@ -227,6 +228,21 @@ def test_imitation_weight_schedule():
         [1.0, 0.55, 0.1, 0.1])
     off = validate(compose_config(["teacher.coeff=0", "teacher.final=0"]))
     assert imitation_coeff(off, 0) == 0.0
+
+
+def test_learning_rate_schedule():
+    """ppo.lr 0.002 annealed over 1000 frames to a tenth of it; constant without anneal_lr;
+    a final fraction outside [0, 1] is refused."""
+    from crllk.train import learning_rate
+
+    config = validate(compose_config(["ppo.lr=0.002", "ppo.anneal_lr=true",
+                                      "ppo.lr_final_fraction=0.1", "total_frames=1000"]))
+    assert [learning_rate(config, f) for f in (0, 500, 1000, 2000)] == pytest.approx(
+        [0.002, 0.0011, 0.0002, 0.0002])
+    constant = validate(compose_config(["ppo.lr=0.002", "total_frames=1000"]))
+    assert learning_rate(constant, 900) == 0.002
+    with pytest.raises(ConfigError, match=r"ppo\.lr_final_fraction"):
+        validate(compose_config(["ppo.lr_final_fraction=1.5"]))
 
 
 def test_teacher_and_encounters_reach_the_training_run(tmp_path):
