@@ -14,7 +14,7 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 os.environ.setdefault("PYOPENGL_PLATFORM", os.environ["MUJOCO_GL"])
 
 from crllk import maps
-from crllk.lane_keeping import load
+from crllk.tasks.lane_keeping import load
 
 __all__ = ["load", "make_env", "maps"]
 
@@ -22,7 +22,7 @@ __all__ = ["load", "make_env", "maps"]
 def __getattr__(name: str):
     """``crllk.make_env`` imports TorchRL only when first used."""
     if name == "make_env":
-        from crllk.envs import make_env
+        from crllk.envs.batched import make_env
 
         return make_env
     raise AttributeError(f"module 'crllk' has no attribute {name!r}")

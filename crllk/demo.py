@@ -11,8 +11,8 @@ import time
 from collections.abc import Sequence
 from pathlib import Path
 
+from crllk.analysis.pictures import DEFAULT_MAPS, write_pictures
 from crllk.maps import load_map
-from crllk.pictures import DEFAULT_MAPS, write_pictures
 from crllk.sim.scene import export_scene
 
 

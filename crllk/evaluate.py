@@ -23,35 +23,21 @@ from __future__ import annotations
 
 import json
 import sys
-from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import torch
 from omegaconf import OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
-from crllk.actions import DISCRETE_NAMES
-from crllk.checkpoint import atomic_write_text
-from crllk.envs import make_env
-from crllk.episodes import summarise
 from crllk.errors import ConfigError
-from crllk.evaluation import EvaluationResult, run_episodes
-from crllk.follower import FollowerPolicy
-from crllk.runs import EVAL_FILE, load_actor, load_run_config
-from crllk.train import build_env
+from crllk.evaluation.report import DEFAULT_SEED, aggregate, format_aggregate, format_summary
+from crllk.evaluation.runs import evaluate_follower, evaluate_run, record_run
+from crllk.files import atomic_write_text
 
 SOURCE = "evaluate"
-DEFAULT_SEED = 1_000_000
-"""Spawn seed of evaluations without a run (the follower), as ``eval.seed`` of training."""
-CONTINUOUS_BINS = np.linspace(-1.0, 1.0, 11)
-"""Edges of the continuous action histogram (velocity and steering lie in [-1, 1])."""
-METRICS = ("J_R", "J_clane", "J_coll", "episode_length")
-
-
 @dataclass
 class EvaluateConfig:
     """Command-line settings (``key=value``)."""
@@ -78,187 +64,7 @@ class EvaluateConfig:
 
 
 # ----- one evaluation ----------------------------------------------------------------------
-def action_histogram(actions: Sequence[np.ndarray], action: str) -> dict[str, Any]:
-    """Discrete: the fraction of steps per action; continuous (and duty): counts per bin of
-    each action component over :data:`CONTINUOUS_BINS`."""
-    flat = np.concatenate([np.asarray(a).reshape(len(a), -1) for a in actions])
-    if action == "discrete":
-        counts = np.bincount(flat[:, 0].astype(np.int64), minlength=len(DISCRETE_NAMES))
-        return {name: float(c / counts.sum()) for name, c in zip(DISCRETE_NAMES, counts,
-                                                                   strict=True)}
-    names = ("left", "right") if action == "duty" else ("velocity", "steering")
-    return {"bin_edges": CONTINUOUS_BINS.tolist(),
-            **{name: np.histogram(np.clip(flat[:, k], -1, 1), CONTINUOUS_BINS)[0].tolist()
-               for k, name in enumerate(names)},
-            **{f"{name}_mean": float(flat[:, k].mean()) for k, name in enumerate(names)}}
-
-
-def episode_rows(result: EvaluationResult, action: str) -> list[dict[str, Any]]:
-    rows = []
-    for k, (stats, termination, actions) in enumerate(
-            zip(result.episodes, result.terminations, result.actions, strict=True)):
-        reason = termination or ("time_limit" if stats.truncated else None)
-        row = {"episode": k, **stats.as_row(), "termination": reason,
-               "direction": _at(result.directions, k), "hit_object": _at(result.hit_objects, k)}
-        if action == "discrete":
-            counts = np.bincount(np.asarray(actions).reshape(-1).astype(np.int64),
-                                 minlength=len(DISCRETE_NAMES))
-            row["actions"] = dict(zip(DISCRETE_NAMES, counts.tolist(), strict=True))
-        rows.append(row)
-    return rows
-
-
-def _at(values: Sequence[Any], k: int) -> Any:
-    return values[k] if k < len(values) else None
-
-
-def breakdown(result: EvaluationResult, objects: Sequence[Any] = ()) -> dict[str, Any]:
-    """The metrics per start direction of the loop, and how many episodes ended on each
-    obstacle (``objects``: the map's, to name them by kind and position)."""
-    by_direction = {}
-    for direction in ("intended", "reverse"):
-        chosen = [e for e, d in zip(result.episodes, result.directions, strict=True)
-                  if d == direction]
-        if chosen:
-            by_direction[direction] = summarise(chosen).as_row()
-    hits: dict[str, int] = {}
-    for index in result.hit_objects:
-        if index is not None:
-            obj = objects[index] if index < len(objects) else None
-            name = f"{index}" if obj is None else f"{index} {obj.kind} ({obj.x:.2f}, {obj.y:.2f})"
-            hits[name] = hits.get(name, 0) + 1
-    return {"by_direction": by_direction, "collisions_by_object": dict(sorted(hits.items()))}
-
-
-def result_document(result: EvaluationResult, action: str, *, thresholds: dict[str, float],
-                    settings: dict[str, Any], source: dict[str, Any],
-                    objects: Sequence[Any] = ()) -> dict[str, Any]:
-    """The ``eval.json`` content of one evaluation (``objects``: the map's, named in the
-    breakdown of collisions)."""
-    s = result.summary
-    rows = episode_rows(result, action)
-    summary = {"J_R": s.J_R, "J_clane": s.J_clane, "J_coll": s.J_coll,
-               "episode_length": s.length,
-               "satisfied": bool(s.J_clane <= thresholds["lane"]
-                                 and s.J_coll <= thresholds["collision"])}
-    return {"source": source, "evaluation": settings, "thresholds": thresholds,
-            "summary": summary, "action_histogram": action_histogram(result.actions, action),
-            "terminations": dict(Counter(row["termination"] for row in rows)),
-            "breakdown": breakdown(result, objects),
-            "episodes": rows}
-
-
-def evaluate_run(run_dir: str | Path, *, episodes: int, deterministic: bool = False,
-                 seed: int | None = None, num_envs: int = 10) -> dict[str, Any]:
-    """Plays the run's checkpoint and writes ``<run_dir>/eval.json``; returns its content."""
-    config = load_run_config(run_dir)
-    seed = config.eval.seed if seed is None else seed
-    env = build_env(config, num_envs=num_envs, seed=seed)
-    try:
-        actor, info = load_actor(run_dir, env)
-        result = run_episodes(env, actor, episodes, deterministic=deterministic,
-                              sample_seed=seed)
-    finally:
-        env.close()
-    source = {"run_dir": str(run_dir), "task": config.task_name, "algo": config.algo.name,
-              "action": config.action.name, "obs": config.obs.name, "train_seed": config.seed,
-              **info}
-    settings = {"episodes": episodes, "seed": seed, "num_envs": num_envs,
-                "deterministic": deterministic}
-    thresholds = {"lane": config.algo.lane.threshold,
-                  "collision": config.algo.collision.threshold}
-    document = result_document(result, config.action.name, thresholds=thresholds,
-                               settings=settings, source=source,
-                               objects=env.config.map.objects)
-    atomic_write_text(Path(run_dir) / EVAL_FILE, json.dumps(document, indent=1) + "\n")
-    return document
-
-
-def evaluate_follower(task: str | Path, *, episodes: int, seed: int = DEFAULT_SEED,
-                      num_envs: int = 10, thresholds: dict[str, float] | None = None,
-                      avoid_obstacles: bool = False) -> dict[str, Any]:
-    """The scripted lane follower through the same episodes and metrics as a run; with
-    ``avoid_obstacles`` the training teacher, which swerves around obstacles."""
-    env = make_env(task, num_envs=num_envs, observation="state", action="duty", seed=seed)
-    try:
-        result = run_episodes(env, FollowerPolicy(env, avoid_obstacles=avoid_obstacles),
-                              episodes)
-    finally:
-        env.close()
-    objects = env.config.map.objects
-    return result_document(
-        result, "duty", thresholds=thresholds or {"lane": 0.5, "collision": 0.02},
-        settings={"episodes": episodes, "seed": seed, "num_envs": num_envs,
-                  "deterministic": True},
-        source={"task": str(task), "algo": "teacher" if avoid_obstacles else "follower",
-                "action": "duty", "obs": "state"},
-        objects=objects)
-
-
-def record_run(run_dir: str | Path, *, episodes: int, seed: int | None = None,
-               deterministic: bool = True, viewer: str = "none") -> Path:
-    """Records ``episodes`` evaluation episodes of the run's policy (from the same spawn seed as
-    :func:`evaluate_run`) to ``<run_dir>/recordings/eval.rrd``; returns the path.
-
-    Raises:
-        crllk.errors.RecordingError: if the file cannot be written (a ConfigError).
-    """
-    from crllk.record import record_episodes  # rerun is imported only when recording
-
-    config = load_run_config(run_dir)
-    env = build_env(config, num_envs=1, seed=config.eval.seed if seed is None else seed)
-    path = Path(run_dir) / "recordings" / "eval.rrd"
-    try:
-        actor, info = load_actor(run_dir, env)
-        report = record_episodes(env, actor, episodes, path, deterministic=deterministic,
-                                 viewer=viewer, multipliers=info["multipliers"],
-                                 recording_id=f"crllk-eval-{Path(run_dir).resolve()}")
-    finally:
-        env.close()
-    for message in report.warnings:
-        print(f"warning: {message}", file=sys.stderr, flush=True)
-    print(f"recording: {path} ({report.episodes} episodes, {report.steps} steps)", flush=True)
-    return path
-
-
 # ----- several runs ------------------------------------------------------------------------
-def aggregate(documents: Sequence[dict[str, Any]]) -> dict[str, Any]:
-    """Mean and standard deviation (population, ddof 0) across runs of each metric, with
-    the per-run values."""
-    out: dict[str, Any] = {"runs": [d["source"].get("run_dir") for d in documents]}
-    for metric in METRICS:
-        values = [float(d["summary"][metric]) for d in documents]
-        out[metric] = {"mean": float(np.mean(values)), "std": float(np.std(values)),
-                       "values": values}
-    out["satisfied"] = [bool(d["summary"]["satisfied"]) for d in documents]
-    return out
-
-
-def format_summary(document: dict[str, Any]) -> str:
-    s, src = document["summary"], document["source"]
-    name = src.get("run_dir") or f"{src['algo']} on {src['task']}"
-    verdict = "both constraints hold" if s["satisfied"] else "constraints violated"
-    text = (f"{name}: {document['evaluation']['episodes']} episodes: J_R {s['J_R']:.2f} m, "
-            f"J_clane {s['J_clane']:.3f} dm, J_coll {s['J_coll']:.3f}, "
-            f"length {s['episode_length']:.0f}: {verdict}")
-    split = document.get("breakdown", {})
-    for direction, row in split.get("by_direction", {}).items():
-        text += (f"\n  started {direction}: {row['episodes']} episodes, J_clane "
-                 f"{row['J_clane']:.3f} dm, J_coll {row['J_coll']:.3f}")
-    if split.get("collisions_by_object"):
-        text += "\n  ended on: " + ", ".join(f"{obstacle} ×{count}" for obstacle, count
-                                            in split["collisions_by_object"].items())
-    return text
-
-
-def format_aggregate(result: dict[str, Any]) -> str:
-    def show(metric: str, digits: int) -> str:
-        return f"{result[metric]['mean']:.{digits}f} ± {result[metric]['std']:.{digits}f}"
-
-    return (f"{len(result['runs'])} runs: J_R {show('J_R', 2)} m, J_clane {show('J_clane', 3)} "
-            f"dm, J_coll {show('J_coll', 3)}")
-
-
 # ----- command line ------------------------------------------------------------------------
 def parse(argv: Sequence[str]) -> EvaluateConfig:
     """``key=value`` arguments checked against :class:`EvaluateConfig`."""

@@ -32,9 +32,10 @@ from typing import Any
 
 import torch
 
-from crllk.checkpoint import atomic_write_text
-from crllk.evaluate import DEFAULT_SEED, aggregate, evaluate_follower
-from crllk.runs import CHECKPOINT_FILE, EVAL_FILE, read_eval_json
+from crllk.evaluation.report import DEFAULT_SEED, aggregate
+from crllk.evaluation.runs import evaluate_follower
+from crllk.files import atomic_write_text
+from crllk.training.runs import CHECKPOINT_FILE, EVAL_FILE, read_eval_json
 
 THRESHOLDS = {"lane": 0.5, "collision": 0.02}
 """alpha_1 (dm) and alpha_2 (collisions per episode) of the paper's Table 1."""
@@ -382,7 +383,7 @@ def _pairs(agents: Sequence[str]) -> list[tuple[str, str]]:
 
 
 def figure1(settings: Settings) -> list[Path]:
-    from crllk.figures import figure1_pictures  # matplotlib only when drawing
+    from crllk.analysis.figures import figure1_pictures  # matplotlib only when drawing
 
     specs = [RunSpec("CRLLK-D", "small_loop", seed, threshold)
              for threshold in FIGURE_THRESHOLDS for seed in settings.seeds]
@@ -410,7 +411,7 @@ def sweep_specs(settings: Settings) -> list[RunSpec]:
 def sweep(settings: Settings) -> list[Path]:
     """Fixed-weight PPO-D over :data:`SWEEP_LANE_WEIGHTS` × :data:`SWEEP_COLLISION_WEIGHTS` next
     to CRLLK-D on every map: ``<results>/<obs>/sweep.json``, ``.md`` and ``.png``."""
-    from crllk.figures import draw_sweep, save_figure  # matplotlib only when drawing
+    from crllk.analysis.figures import draw_sweep, save_figure  # matplotlib only when drawing
 
     specs = sweep_specs(settings)
     outcome = train_and_evaluate(specs, settings)

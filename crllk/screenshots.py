@@ -7,9 +7,9 @@ view.
 The viewer runs with ``--headless`` (software Vulkan: Debian's ``mesa-vulkan-drivers`` and
 ``libvulkan1``, installed by ``scripts/install-egl.sh``) on a free port of 127.0.0.1 and is
 driven with ``rerun.experimental.ViewerClient``: open the file, wait until it has loaded, move
-the time cursor, wait until two consecutive frames agree, save the picture. With ``--train``
-the viewer connects to the live view of a training run (``live=serve``, :mod:`crllk.live`) that
-runs meanwhile, and the picture shows the run's end. The viewer is always stopped, whatever
+the time cursor, wait until two consecutive frames agree, save the picture. With ``--train`` the
+viewer connects to the live view of a training run (``live=serve``, :mod:`crllk.recording.live`)
+that runs meanwhile, and the picture shows the run's end. The viewer is always stopped, whatever
 fails. Every view's warnings and errors are printed.
 """
 
@@ -28,7 +28,7 @@ from typing import NoReturn
 
 from rerun.experimental import ViewerClient
 
-from crllk.viewer import (
+from crllk.recording.viewer import (
     VIEWER_HOST,
     free_port,
     start_viewer,

@@ -13,7 +13,7 @@ import pytest
 
 from crllk.errors import ConfigError, MapError
 from crllk.maps import load_map
-from crllk.task_config import load_task_config
+from crllk.tasks.config import load_task_config
 
 DATA = Path(__file__).parent / "data"
 S = 0.585
@@ -224,7 +224,7 @@ def test_valid_task_file_with_settings(tmp_path):
 def test_control_rate_must_divide_the_physics_rate():
     """A control rate that is no whole fraction of 240 Hz is refused naming the field."""
     from crllk.errors import ConfigError
-    from crllk.task_config import load_task_config
+    from crllk.tasks.config import load_task_config
 
     with pytest.raises(ConfigError, match=r"small_loop\.yaml: control_rate: 7 Hz does not divide"):
         load_task_config("small_loop", {"control_rate": 7})

@@ -32,7 +32,7 @@ def test_pictures_command_writes_each_requested_map(tmp_path):
 
 def test_bench_prints_each_figure_with_its_bound(capsys):
     """`python -m crllk.bench` at a tiny budget prints the four figures and two ratios."""
-    from crllk import bench
+    from crllk.bench import cli as bench
 
     bench.main(["--steps", "20"])
     printed = capsys.readouterr().out
@@ -43,7 +43,7 @@ def test_bench_prints_each_figure_with_its_bound(capsys):
 def test_bench_batched_and_training_figures(capsys, tmp_path):
     """The batched-environment and training figures, and the time to satisfy both constraints
     read from a run's eval.csv, at a tiny budget."""
-    from crllk import bench
+    from crllk.bench import cli as bench
 
     run = tmp_path / "run"
     run.mkdir()

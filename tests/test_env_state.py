@@ -7,7 +7,7 @@ import pytest
 import torch
 from tensordict import TensorDictBase
 
-from crllk.envs import BatchedLaneKeepingEnv, make_env
+from crllk.envs.batched import BatchedLaneKeepingEnv, make_env
 
 TASK = "small_loop"
 HORIZON = {"horizon": 30}

@@ -13,7 +13,7 @@ from torchrl.envs import RewardSum, TransformedEnv
 from torchrl.envs.utils import check_env_specs
 
 import crllk
-from crllk.envs import COST_KEYS, BatchedLaneKeepingEnv, make_env, sub_env_seeds
+from crllk.envs.batched import COST_KEYS, BatchedLaneKeepingEnv, make_env, sub_env_seeds
 from crllk.sim.physics import box_average
 
 TASK = "small_loop"
@@ -215,9 +215,9 @@ def test_reset_output_is_a_tensordict(build):
 
 
 def test_make_env_is_exported_lazily():
-    """`crllk.make_env` is the batched environment factory of crllk.envs."""
+    """`crllk.make_env` is the batched environment factory of crllk.envs.batched."""
     import crllk
-    from crllk.envs import make_env
+    from crllk.envs.batched import make_env
 
     assert crllk.make_env is make_env
 

@@ -14,9 +14,10 @@ import torch
 from tiny_runs import run_in_process
 from torchrl.envs.utils import ExplorationType, set_exploration_type, step_mdp
 
-from crllk.envs import make_env
-from crllk.evaluate import aggregate, evaluate_follower, evaluate_run
-from crllk.runs import load_actor, read_eval_json
+from crllk.envs.batched import make_env
+from crllk.evaluation.report import aggregate
+from crllk.evaluation.runs import evaluate_follower, evaluate_run
+from crllk.training.runs import load_actor, read_eval_json
 
 REPO = Path(__file__).resolve().parents[1]
 EPISODES, NUM_ENVS, SEED = 5, 2, 7
@@ -151,7 +152,7 @@ def test_a_directory_without_a_run_fails_clearly(tmp_path):
 
 def test_a_pixel_run_with_state_critics_evaluates_and_draws(tmp_path):
     """Pixel policies whose critics read the state features rebuild their env with that state."""
-    from crllk.figures import policy_trajectory
+    from crllk.analysis.figures import policy_trajectory
 
     run = run_in_process(tmp_path / "pixels", 1, ["obs=pixels", "model.critic_input=state"])
     document = evaluate_run(run, episodes=2, num_envs=2, seed=1)

@@ -11,7 +11,7 @@ from pathlib import Path
 from conftest import TINY_EXPERIMENT
 
 from crllk.experiments import AGENTS, PAPER_TABLE1, sweep_markdown, table_markdown
-from crllk.runs import read_eval_json
+from crllk.training.runs import read_eval_json
 
 REPO = Path(__file__).resolve().parents[1]
 

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import crllk
-from crllk.follower import LaneFollower
+from crllk.tasks.follower import LaneFollower
 
 
 def _drive(env, follower, max_steps=None):

@@ -8,7 +8,7 @@ import math
 import pytest
 import torch
 
-from crllk.lagrange import LagrangeMultiplier, PIDLagrangeMultiplier, make_multiplier
+from crllk.rl.lagrange import LagrangeMultiplier, PIDLagrangeMultiplier, make_multiplier
 
 
 def _dual(**overrides: object) -> LagrangeMultiplier:

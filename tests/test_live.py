@@ -12,12 +12,13 @@ import rerun as rr
 from tiny_runs import compose_config, run_in_process
 
 import crllk
-from crllk import live
 from crllk.errors import ConfigError
-from crllk.live import PREFIX, SERIES, THRESHOLD, LiveView
-from crllk.record import FollowerPolicy, read_recording, record_episodes
-from crllk.train_config import validate
-from crllk.viewer import free_port
+from crllk.recording import live
+from crllk.recording.live import PREFIX, SERIES, THRESHOLD, LiveView
+from crllk.recording.recorder import read_recording, record_episodes
+from crllk.recording.viewer import free_port
+from crllk.tasks.follower import FollowerPolicy
+from crllk.training.config import validate
 
 THRESHOLDS = {"J_clane": 0.5, "J_coll": 0.02}
 

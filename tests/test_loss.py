@@ -15,7 +15,7 @@ from torch.distributions import Categorical
 from torchrl.modules import MLP, ProbabilisticActor, TanhNormal, ValueOperator
 from torchrl.objectives import ClipPPOLoss
 
-from crllk.loss import LagrangianPPOLoss, make_advantage_modules
+from crllk.rl.loss import LagrangianPPOLoss, make_advantage_modules
 
 _OBS_DIM = 4
 _N_ACTIONS = 3

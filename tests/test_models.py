@@ -7,7 +7,7 @@ import torch
 from tensordict import TensorDict
 from torchrl.data import Bounded, Categorical
 
-from crllk.models import (
+from crllk.rl.models import (
     ModelConfig,
     make_actor,
     make_critic,
@@ -73,7 +73,7 @@ def test_shared_critic_writes_one_value_per_head_from_one_encoder():
 
 
 def test_loss_runs_a_shared_critic_once_per_batch():
-    from crllk.loss import LagrangianPPOLoss
+    from crllk.rl.loss import LagrangianPPOLoss
 
     keys = ["state_value", "state_value_lane", "state_value_collision"]
     critic = make_shared_critic("state", (4,), ModelConfig(), keys)

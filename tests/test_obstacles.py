@@ -11,14 +11,14 @@ import torch
 
 import crllk
 from crllk.errors import ConfigError
-from crllk.lane_keeping import (
+from crllk.maps import load_map
+from crllk.maps.obstacles import ObstacleIndex, road_band
+from crllk.tasks.lane_keeping import (
     OBSTACLE_RANGE,
     OBSTACLES_REPORTED,
     _footprint_gap,
     state_feature_names,
 )
-from crllk.maps import load_map
-from crllk.maps.obstacles import ObstacleIndex, road_band
 
 DUCKIE_TOP, CONE_RIGHT, CONE_LEFT, DUCKIE_CURVE, DUCKIEBOT, BARRIER, DUCKIE_BORDER = range(7)
 """obstacle_loop's objects, in the order of its task file."""

@@ -12,7 +12,9 @@ import numpy as np
 import pytest
 
 import crllk
-from crllk.actions import (
+from crllk.maps import load_map
+from crllk.sim.physics import Physics
+from crllk.tasks.actions import (
     DISCRETE_DUTIES,
     MAX_DUTY_DIFFERENCE,
     MAX_MEAN_DUTY,
@@ -21,9 +23,7 @@ from crllk.actions import (
     drive_turn_to_duty,
     velocity_steering_to_duty,
 )
-from crllk.maps import load_map
-from crllk.sim.physics import Physics
-from crllk.task_config import MotorConfig
+from crllk.tasks.config import MotorConfig
 
 CONTROL_DT = 1.0 / 30.0
 SUBSTEPS = 8

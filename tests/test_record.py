@@ -12,23 +12,28 @@ import numpy as np
 import pytest
 import torch
 from rerun.chunk import RrdReader
-from torchrl.envs.utils import step_mdp
+from torchrl.envs.utils import ExplorationType, set_exploration_type, step_mdp
 
 import crllk
-from crllk import record
-from crllk.evaluation import run_episodes
-from crllk.lane_keeping import state_feature_names
-from crllk.models import ModelConfig, make_actor
-from crllk.record import (
-    ACTION_ENTITY_PATHS,
-    ENTITY_PATHS,
-    FollowerPolicy,
-    RecordingError,
-    read_recording,
-    record_episodes,
+from crllk.analysis.recording_picture import (
+    draw_recording,
+    positions,
+    scalars,
+    series,
+    static_value,
 )
-from crllk.recording_picture import draw_recording, positions, scalars, series, static_value
+from crllk.envs.episodes import EpisodeStats
+from crllk.errors import RecordingError
+from crllk.maps import markings
+from crllk.recording import blueprint as layout
+from crllk.recording import recorder
+from crllk.recording.entities import ACTION_ENTITY_PATHS, ENTITY_PATHS
+from crllk.recording.recorder import read_recording, record_episodes
+from crllk.rl.models import ModelConfig, make_actor
+from crllk.rl.rollout import run_episodes
 from crllk.sim import constants as C
+from crllk.tasks.follower import FollowerPolicy
+from crllk.tasks.lane_keeping import state_feature_names
 
 HORIZON = 30
 EPISODES = 2
@@ -66,7 +71,7 @@ def _replay_costs(actor) -> dict[str, list[float]]:
     env = _env()
     costs: dict[str, list[float]] = {"cost_lane": [], "cost_collision": []}
     td, done = env.reset(), 0
-    with torch.no_grad(), record.set_exploration_type(record.ExplorationType.DETERMINISTIC):
+    with torch.no_grad(), set_exploration_type(ExplorationType.DETERMINISTIC):
         while done < EPISODES:
             stepped = env.step(actor(td))
             for key, values in costs.items():
@@ -133,7 +138,7 @@ def _views(container) -> list:
 
 
 def test_blueprint_gives_every_series_its_own_plot_and_a_chase_view():
-    blueprint = record.make_blueprint("continuous", ["lane", "collision"])
+    blueprint = layout.make_blueprint("continuous", ["lane", "collision"])
     views = _views(blueprint.root_container)
     plots = [v.origin for v in views if v.class_identifier == "TimeSeries"]
     assert sorted(plots) == sorted(
@@ -147,12 +152,12 @@ def test_blueprint_gives_every_series_its_own_plot_and_a_chase_view():
 
 
 def test_episode_plot_ranges_keep_points_off_the_edges():
-    stats = [record.EpisodeStats(0, -0.5, 0.2, 1.0, 48, False),
-             record.EpisodeStats(0, 2.0, 0.0, 0.0, 150, True)]
-    ranges = record.episode_ranges(stats)
+    stats = [EpisodeStats(0, -0.5, 0.2, 1.0, 48, False),
+             EpisodeStats(0, 2.0, 0.0, 0.0, 150, True)]
+    ranges = layout.episode_ranges(stats)
     assert ranges["episode/distance"] == pytest.approx((-0.6, 2.4))
     assert ranges["episode/length"] == pytest.approx((0.0, 180.0))
-    assert record.episode_ranges([record.EpisodeStats(0, 0.0, 0.0, 0.0, 0, True)])[
+    assert layout.episode_ranges([EpisodeStats(0, 0.0, 0.0, 0.0, 0, True)])[
         "episode/collisions"] == (0.0, 1.0)
 
 
@@ -225,16 +230,16 @@ def test_unreachable_viewer_is_reported_once_and_the_files_are_written(tmp_path,
     monkeypatch.setenv("PATH", "")
     for name in ("DISPLAY", "WAYLAND_DISPLAY", "WAYLAND_SOCKET"):
         monkeypatch.delenv(name, raising=False)
-    monkeypatch.setattr(record, "VIEWER_PORT", _free_port())
-    monkeypatch.setattr(record, "_FAILED_VIEWERS", set())
+    monkeypatch.setattr(recorder, "VIEWER_PORT", _free_port())
+    monkeypatch.setattr(recorder, "_FAILED_VIEWERS", set())
     attempts = []
-    spawn_viewer = record.spawn_viewer
+    spawn_viewer = recorder.spawn_viewer
 
     def spawn(port):
         attempts.append(port)
         return spawn_viewer(port)
 
-    monkeypatch.setattr(record, "spawn_viewer", spawn)
+    monkeypatch.setattr(recorder, "spawn_viewer", spawn)
     env = _env(1)
     reports = [record_episodes(env, _actor(env), 1, tmp_path / f"v{k}.rrd", viewer="spawn")
                for k in range(2)]
@@ -262,7 +267,7 @@ def _listening_addresses(port: int) -> set[str]:
 @pytest.mark.skipif(not Path("/proc/net/tcp").exists(), reason="needs Linux /proc/net/tcp")
 def test_served_recording_listens_on_localhost_only(tmp_path, monkeypatch):
     port = _free_port()
-    monkeypatch.setattr(record, "VIEWER_PORT", port)
+    monkeypatch.setattr(recorder, "VIEWER_PORT", port)
     env = _env(1)
     actor = _actor(env)
     seen: list[set[str]] = []
@@ -290,8 +295,8 @@ def test_every_rerun_command_in_the_readme_binds_to_localhost():
 
 def test_markings_lie_on_the_road():
     dmap = crllk.maps.load_map("obstacle_loop")
-    for strips in (record.white_marking_strips(dmap), record.yellow_marking_strips(dmap),
-                   record.lane_centre_strips(dmap)):
+    for strips in (markings.white_marking_strips(dmap), markings.yellow_marking_strips(dmap),
+                   markings.lane_centre_strips(dmap)):
         points = np.concatenate(strips)
         assert all(dmap.is_road(x, y) for x, y, _ in points)
 

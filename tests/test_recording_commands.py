@@ -10,7 +10,8 @@ from pathlib import Path
 import pyarrow as pa
 from tiny_runs import TINY, run_in_process
 
-from crllk.record import IMAGE, ROBOT, read_recording
+from crllk.recording.entities import IMAGE, ROBOT
+from crllk.recording.recorder import read_recording
 
 REPO = Path(__file__).resolve().parents[1]
 

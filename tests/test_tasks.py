@@ -12,8 +12,8 @@ import pytest
 from dm_env import specs
 
 import crllk
-from crllk.lane_keeping import ACTIONS, OBSERVATIONS, state_feature_names
 from crllk.paths import task_names
+from crllk.tasks.lane_keeping import ACTIONS, OBSERVATIONS, state_feature_names
 
 TASKS = task_names()
 CASES = list(itertools.product(TASKS, OBSERVATIONS, ACTIONS))

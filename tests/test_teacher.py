@@ -9,9 +9,9 @@ import torch
 from torchrl.envs.utils import check_env_specs
 
 import crllk
-from crllk.actions import drive_turn_duty, velocity_steering_duty
-from crllk.evaluation import run_episodes
-from crllk.teacher import Teacher, duty_to_action
+from crllk.rl.rollout import run_episodes
+from crllk.tasks.actions import drive_turn_duty, velocity_steering_duty
+from crllk.tasks.teacher import Teacher, duty_to_action
 
 
 @pytest.mark.parametrize(("duty", "expected"), [

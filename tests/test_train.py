@@ -14,9 +14,9 @@ import pytest
 import torch
 from tiny_runs import FRAMES_PER_ITERATION, NUM_ENVS, TINY, compose_config, run_in_process
 
-from crllk.checkpoint import load_checkpoint
 from crllk.errors import ConfigError
-from crllk.train_config import validate
+from crllk.training.checkpoints import load_checkpoint
+from crllk.training.config import validate
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -220,7 +220,7 @@ def test_a_run_being_trained_cannot_be_trained_twice(tmp_path):
 
 def test_imitation_weight_schedule():
     """teacher.coeff 1 falling to teacher.final 0.1 over 100 frames, then staying there."""
-    from crllk.train import imitation_coeff
+    from crllk.training.schedules import imitation_coeff
 
     config = validate(compose_config(["teacher.coeff=1.0", "teacher.final=0.1",
                                       "teacher.frames=100"]))
@@ -233,7 +233,7 @@ def test_imitation_weight_schedule():
 def test_learning_rate_schedule():
     """ppo.lr 0.002 annealed over 1000 frames to a tenth of it; constant without anneal_lr;
     a final fraction outside [0, 1] is refused."""
-    from crllk.train import learning_rate
+    from crllk.training.schedules import learning_rate
 
     config = validate(compose_config(["ppo.lr=0.002", "ppo.anneal_lr=true",
                                       "ppo.lr_final_fraction=0.1", "total_frames=1000"]))
@@ -274,7 +274,7 @@ def test_bad_teacher_and_encounter_overrides(override, field):
 def test_last_evaluation_row_agrees_with_crllk_evaluate(tmp_path):
     """The evaluation written at the end of training is the one python -m crllk.evaluate
     makes of the last checkpoint with the same episodes: same numbers, same verdict."""
-    from crllk.evaluate import evaluate_run
+    from crllk.evaluation.runs import evaluate_run
 
     run = run_in_process(tmp_path / "run", 2, ["task=obstacle_loop", "obs=state",
                                                "eval.every=5", "eval.episodes=4",

@@ -19,7 +19,9 @@ from PIL import Image
 from tiny_runs import TINY
 
 import crllk
-from crllk.record import CAMERA, CAMERA_VIEW, IMAGE, FollowerPolicy, record_episodes
+from crllk.recording.entities import CAMERA, CAMERA_VIEW, IMAGE
+from crllk.recording.recorder import record_episodes
+from crllk.recording.viewer import free_port, viewer_listening
 from crllk.screenshots import (
     WINDOW_SIZE,
     ScreenshotError,
@@ -30,7 +32,7 @@ from crllk.screenshots import (
     view_problems,
     wait_loaded,
 )
-from crllk.viewer import free_port, viewer_listening
+from crllk.tasks.follower import FollowerPolicy
 
 pytestmark = pytest.mark.viewer
 

@@ -7,7 +7,8 @@ from pathlib import Path
 from hydra import compose, initialize_config_module
 
 import crllk  # noqa: F401  (headless GL before torchrl)
-from crllk.train import resolve_config, train
+from crllk.train import resolve_config
+from crllk.training.loop import train
 
 NUM_ENVS, ROLLOUT = 2, 8
 FRAMES_PER_ITERATION = NUM_ENVS * ROLLOUT

@@ -4,28 +4,15 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import yaml
-
 from crllk.errors import MapError
+from crllk.files import read_yaml
 from crllk.maps.format import MapObject, MapSpec, Tile, parse_map
 from crllk.maps.lanes import Lane
 from crllk.maps.road import DuckietownMap, LanePose
 from crllk.paths import task_file, task_names
 
 __all__ = ["DuckietownMap", "Lane", "LanePose", "MapError", "MapObject", "MapSpec", "Tile",
-           "load_map", "read_yaml"]
-
-
-def read_yaml(path: Path) -> object:
-    """Read a YAML file, turning syntax errors into a :class:`MapError` naming the file."""
-    try:
-        return yaml.safe_load(path.read_text())
-    except OSError as err:
-        raise MapError(path, "<file>", f"cannot read: {err.strerror}") from None
-    except yaml.YAMLError as err:
-        mark = getattr(err, "problem_mark", None)
-        where = f"line {mark.line + 1}" if mark else "<file>"
-        raise MapError(path, where, f"not valid YAML: {getattr(err, 'problem', err)}") from None
+           "load_map"]
 
 
 def load_map(name_or_path: str | Path) -> DuckietownMap:

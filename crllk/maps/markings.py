@@ -2,7 +2,7 @@
 
 Each strip is an array ``[K, 3]`` of points (x east, y north, z up, m) sampled every 2 cm
 along a lane. The tape lies where the floor texture (:mod:`crllk.sim.texture`) paints it;
-:mod:`crllk.record` draws these strips over the tiles.
+:mod:`crllk.recording.recorder` draws these strips over the tiles.
 """
 
 from __future__ import annotations
@@ -13,7 +13,15 @@ import numpy as np
 
 from crllk.maps.lanes import LANE_OFFSET, OPPOSITE, RIGHT_OF, Lane
 from crllk.maps.road import DuckietownMap, openings
-from crllk.sim.texture import DASH_LENGTH, GAP_LENGTH, WHITE_INNER, WHITE_WIDTH
+
+WHITE_INNER = 0.015
+"""Distance of the white tape's outer edge from the tile edge (m)."""
+WHITE_WIDTH = 0.048
+YELLOW_WIDTH = 0.024
+"""Widths of the white edge tape and of the yellow centre tape (m)."""
+DASH_LENGTH = 0.05
+GAP_LENGTH = 0.025
+"""Length of the yellow dashes and of the gaps between them (m)."""
 
 _LINE_SPACING = 0.02
 """Sample spacing of lane and marking polylines (m)."""

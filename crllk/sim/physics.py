@@ -11,11 +11,10 @@ import numpy as np
 from dm_control import mujoco as dm_mujoco
 from dm_control.mujoco.wrapper import MjModel
 
-from crllk.actions import clip_duty
 from crllk.maps import DuckietownMap
 from crllk.sim import constants as C
+from crllk.sim.motor import MotorConfig, clip_duty
 from crllk.sim.scene import compile_scene
-from crllk.task_config import MotorConfig
 
 log = logging.getLogger(__name__)
 

@@ -17,8 +17,8 @@ import numpy as np
 from crllk.maps import DuckietownMap, MapObject
 from crllk.paths import DUCKIEBOT_XML
 from crllk.sim import constants as C
+from crllk.sim.motor import MotorConfig
 from crllk.sim.texture import texture_png
-from crllk.task_config import MotorConfig
 
 _SCENE_MARGIN = 1.0
 """Ground visible beyond the map's edge (m)."""

@@ -16,6 +16,13 @@ import numpy as np
 from PIL import Image
 
 from crllk.maps import DuckietownMap, Tile
+from crllk.maps.markings import (
+    DASH_LENGTH,
+    GAP_LENGTH,
+    WHITE_INNER,
+    WHITE_WIDTH,
+    YELLOW_WIDTH,
+)
 from crllk.maps.road import openings
 
 ROAD_RGB = (75, 72, 69)
@@ -23,15 +30,6 @@ WHITE_RGB = (238, 238, 238)
 YELLOW_RGB = (238, 225, 77)
 DECOR_RGB = {"asphalt": (62, 58, 51), "floor": (149, 154, 82), "grass": (93, 129, 44),
              "empty": (30, 30, 34)}
-
-WHITE_INNER = 0.015
-"""Distance of the white tape's outer edge from the tile edge (m)."""
-WHITE_WIDTH = 0.048
-YELLOW_WIDTH = 0.024
-"""Widths of the white edge tape and of the yellow centre tape (m)."""
-DASH_LENGTH = 0.05
-GAP_LENGTH = 0.025
-"""Length of the yellow dashes and of the gaps between them (m)."""
 
 PIXELS_PER_TILE = 128
 """Texels along one tile edge (4.6 mm per texel for 0.585 m tiles)."""

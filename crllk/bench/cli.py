@@ -1,0 +1,77 @@
+"""Throughput benchmarks, each figure next to the bound it is measured against in the same run.
+
+    python -m crllk.bench [--task small_loop] [--steps 3000] [--batched] [--training]
+                          [--runs RUN_DIR ...]
+
+Bounds (DESIGN.md section 7): a state-observation environment step should cost at most twice
+the raw MuJoCo physics of one control step (ratio >= 0.5); a pixel environment step at most
+1/0.6 of the raw physics-plus-render of the same scene (ratio >= 0.6) and the pixel environment
+should reach 1,000 steps/s on 2 cores.
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Sequence
+from pathlib import Path
+
+from crllk.bench.rates import (
+    env_rate,
+    print_row,
+    raw_physics_rate,
+    raw_render_rate,
+    time_to_constraints,
+)
+
+
+def main(argv: Sequence[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--task", default="small_loop")
+    parser.add_argument("--steps", type=int, default=3000, help="control steps per figure")
+    parser.add_argument("--num-envs", type=int, default=32,
+                        help="simulations of the batched environment figures")
+    parser.add_argument("--batched", action="store_true",
+                        help="add batched make_env figures (crllk.envs.batched)")
+    parser.add_argument("--training", action="store_true",
+                        help="add training frames/s next to environment-only frames/s")
+    parser.add_argument("--iterations", type=int, default=5,
+                        help="training iterations per training figure")
+    parser.add_argument("--overrides", nargs="*", default=[],
+                        help="trainer overrides for the training figures (e.g. num_envs=4)")
+    parser.add_argument("--runs", nargs="*", type=Path, default=[],
+                        help="run directories whose eval.csv gives the time to satisfy both "
+                             "constraints")
+    args = parser.parse_args(argv)
+    raw = raw_physics_rate(args.task, args.steps)
+    render = raw_render_rate(args.task, args.steps)
+    print(f"task {args.task}, {args.steps} steps per figure")
+    print(f"{'figure':<48}{'steps/s':>10}{'bound':>10}{'ratio':>8}{'target':>8}")
+    print_row("raw MuJoCo physics (8 substeps)", raw)
+    print_row("raw physics + camera render", render)
+    print_row("env, state observations", env_rate(args.task, "state", args.steps), raw, 0.5)
+    print_row("env, pixel observations", env_rate(args.task, "pixels", args.steps), render, 0.6)
+    if args.batched:
+        from crllk.bench.envs import batched_env_rate
+
+        steps = max(1, args.steps // args.num_envs)
+        for observation, bound, target in (("state", raw, 0.5), ("pixels", render, 0.6)):
+            rate = batched_env_rate(args.task, observation, args.num_envs, steps)
+            print_row(f"make_env {observation}, num_envs={args.num_envs}", rate, bound, target)
+    if args.training:
+        from crllk.bench.training import bench_config, training_rates
+
+        for observation in ("state", "pixels"):
+            config = bench_config([f"task={args.task}", f"obs={observation}", *args.overrides])
+            rates = training_rates(config, iterations=args.iterations)
+            print_row(f"env only, {observation}, num_envs={config.num_envs}", rates.environment)
+            print_row(f"training, {observation} (frames/s)", rates.training,
+                       rates.environment, 0.5)
+    for run_dir in args.runs:
+        seconds, frames = time_to_constraints(run_dir)
+        verdict = ("never" if seconds is None
+                   else f"{seconds:.0f} s ({seconds / 60:.1f} min) at {frames} frames")
+        print(f"time to satisfy both constraints, {run_dir}: {verdict}")
+
+
+if __name__ == "__main__":
+    main()

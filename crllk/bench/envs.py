@@ -1,0 +1,71 @@
+"""Throughput of the batched TorchRL environment, next to the raw MuJoCo bounds.
+
+    python -m crllk.bench.envs [--task small_loop] [--steps 300] [--num-envs 1 8 32]
+                               [--observations state pixels]
+
+Frames are environment steps of one sub-environment: a batched step of N sub-environments is
+N frames. The raw bounds (:func:`crllk.bench.rates.raw_physics_rate`, ``raw_render_rate``) are
+single-simulation control steps/s, so the ratio frames/s / bound is comparable to the budgets
+of DESIGN.md section 7 (state >= 0.5, pixels >= 0.6).
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from collections.abc import Sequence
+
+import torch
+
+from crllk.bench.rates import raw_physics_rate, raw_render_rate
+from crllk.envs.batched import make_env
+
+_WARMUP_STEPS = 10
+
+
+def batched_env_rate(task: str, observation: str, num_envs: int, steps: int,
+                     seed: int = 0) -> float:
+    """Frames/s (``steps * num_envs`` over the time) of ``make_env(task, num_envs=...)``
+    stepped with uniformly random discrete actions and TorchRL auto-reset."""
+    env = make_env(task, num_envs=num_envs, observation=observation, action="discrete",
+                   seed=seed)
+    generator = torch.Generator().manual_seed(seed)
+    actions = torch.randint(0, 3, (steps + _WARMUP_STEPS, num_envs), generator=generator)
+    tensordict = env.reset()
+    for k in range(_WARMUP_STEPS):
+        tensordict["action"] = actions[k]
+        _, tensordict = env.step_and_maybe_reset(tensordict)
+    start = time.perf_counter()
+    for k in range(_WARMUP_STEPS, _WARMUP_STEPS + steps):
+        tensordict["action"] = actions[k]
+        _, tensordict = env.step_and_maybe_reset(tensordict)
+    elapsed = time.perf_counter() - start
+    env.close()
+    return steps * num_envs / elapsed
+
+
+def main(argv: Sequence[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--task", default="small_loop")
+    parser.add_argument("--steps", type=int, default=300, help="batched steps per figure")
+    parser.add_argument("--num-envs", type=int, nargs="+", default=[1, 8, 32])
+    parser.add_argument("--observations", nargs="+", default=["state", "pixels"],
+                        choices=["state", "pixels"])
+    args = parser.parse_args(argv)
+    raw_steps = 3000
+    rates = {"state": raw_physics_rate, "pixels": raw_render_rate}
+    targets = {"state": 0.5, "pixels": 0.6}
+    bounds = {obs: (rates[obs](args.task, raw_steps), targets[obs]) for obs in args.observations}
+    print(f"task {args.task}, {args.steps} batched steps per figure, single process")
+    print(f"{'figure':<36}{'frames/s':>10}{'bound':>10}{'ratio':>8}{'target':>8}")
+    for observation, (bound, target) in bounds.items():
+        for num_envs in args.num_envs:
+            rate = batched_env_rate(args.task, observation, num_envs, args.steps)
+            ratio = rate / bound
+            name = f"make_env {observation}, num_envs={num_envs}"
+            print(f"{name:<36}{rate:>10.0f}{bound:>10.0f}{ratio:>8.2f}{target:>8.2f}"
+                  f"  {'met' if ratio >= target else 'MISSED'}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,143 @@
+"""Frames/s cost of a training run's live view (``live=serve``), measured in one process.
+
+    python -m crllk.bench.live [--iterations 4] [--repetitions 6] [--viewer] [OVERRIDE ...]
+
+Blocks of ``iterations`` training iterations (collection, multipliers, PPO update, as in
+:func:`crllk.training.loop.train`) alternate with the live view off and on (off on, on off, ...),
+``repetitions`` times each, after a warm-up, so that drifts of the machine's load hit both
+alike. With it on, every
+iteration's row goes to the live view and one evaluation recording is forwarded per block (as
+``record_every`` = ``iterations`` would; recording it is not counted, it happens either way).
+``--viewer`` also connects a headless viewer to the stream, on the same machine.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import sys
+import tempfile
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import crllk  # noqa: F401  (headless GL before torchrl)
+from crllk.bench.training import bench_config
+from crllk.envs.episodes import EpisodeAccumulator, summarise
+from crllk.recording.live import LiveView, live_url, server_sink
+from crllk.recording.recorder import record_episodes
+from crllk.recording.viewer import free_port, start_viewer, stop_viewer
+from crllk.rl.rollout import collect
+from crllk.tasks.constraints import COSTS
+from crllk.training.build import Learner, build_env, build_run
+from crllk.training.config import TrainConfig
+from crllk.training.updates import ppo_update, shape_signals, update_multipliers
+
+_TARGET = 0.05
+"""The live view may cost at most this share of training frames/s."""
+
+
+@dataclass(frozen=True)
+class LiveCost:
+    """Frames per second of wall time and of the process's CPU time (all its threads, rerun's
+    included) of each block with the live view off and on."""
+
+    off: tuple[float, ...]
+    on: tuple[float, ...]
+    cpu_off: tuple[float, ...]
+    cpu_on: tuple[float, ...]
+
+    @property
+    def ratio(self) -> float:
+        """Median frames/s on over median frames/s off."""
+        return statistics.median(self.on) / statistics.median(self.off)
+
+    @property
+    def cpu_ratio(self) -> float:
+        """The same per CPU second: less sensitive to other processes on the machine."""
+        return statistics.median(self.cpu_on) / statistics.median(self.cpu_off)
+
+
+def live_cost(config: TrainConfig, iterations: int, repetitions: int, viewer: bool = False
+              ) -> LiveCost:
+    """Alternating off/on blocks of ``iterations`` iterations, ``repetitions`` of each."""
+    env, learner, multipliers, generator = build_run(config)
+    episodes = EpisodeAccumulator(config.num_envs)
+    carry = env.reset()
+    iteration = 0
+
+    def block(live: LiveView | None, recording: Path) -> tuple[float, float]:
+        nonlocal carry, iteration
+        start, cpu_start = time.perf_counter(), time.process_time()
+        for _ in range(iterations):
+            iteration += 1
+            batch, carry = collect(env, learner.actor, carry, config.rollout_steps)
+            finished = episodes.add_batch(batch)
+            update_multipliers(multipliers, finished)
+            learner.loss.set_multipliers([multipliers[c].value for c in COSTS])
+            shape_signals(batch, config, env.config.off_road_lane_cost)
+            losses = ppo_update(learner, batch, config, generator)
+            summary = summarise([e for e in finished if not e.encounter])
+            if live is not None:
+                live.log_iteration({"iteration": iteration, "J_R": summary.J_R,
+                                    "J_clane": summary.J_clane, "J_coll": summary.J_coll,
+                                    **{f"lambda_{c}": multipliers[c].value for c in COSTS},
+                                    **losses, "frames_per_s": 0.0})
+        if live is not None:
+            live.add_recording(recording)
+        frames = iterations * config.frames_per_batch
+        return (frames / (time.perf_counter() - start),
+                frames / (time.process_time() - cpu_start))
+
+    with tempfile.TemporaryDirectory() as scratch:
+        recording = _evaluation_recording(config, learner, Path(scratch) / "iteration.rrd")
+        port = free_port()
+        live = LiveView([server_sink(port)], "crllk-bench-live", {"J_clane": 0.5})
+        process = start_viewer(free_port(), "--headless", "--connect", live_url(port)) \
+            if viewer else None
+        try:
+            block(None, recording)  # warm-up
+            rates: dict[bool, list[tuple[float, float]]] = {False: [], True: []}
+            for k in range(repetitions):  # off on, on off, ...: a drift hits both alike
+                for on in (False, True) if k % 2 == 0 else (True, False):
+                    rates[on].append(block(live if on else None, recording))
+        finally:
+            live.close()
+            if process is not None:
+                stop_viewer(process)
+    env.close()
+    (off, cpu_off), (on, cpu_on) = (tuple(zip(*rates[key], strict=True)) for key in (False, True))
+    return LiveCost(off, on, cpu_off, cpu_on)
+
+
+def _evaluation_recording(config: TrainConfig, learner: Learner, path: Path) -> Path:
+    env = build_env(config, num_envs=1, seed=config.eval.seed)
+    record_episodes(env, learner.actor, 1, path, iteration=0)
+    env.close()
+    return path
+
+
+def main(argv: Sequence[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--iterations", type=int, default=4, help="iterations per block")
+    parser.add_argument("--repetitions", type=int, default=6, help="blocks of each kind")
+    parser.add_argument("--viewer", action="store_true",
+                        help="connect a headless viewer to the live view")
+    parser.add_argument("overrides", nargs="*", default=["obs=state"],
+                        help="trainer overrides (default: obs=state)")
+    args = parser.parse_args(argv)
+    if args.iterations < 1 or args.repetitions < 1:
+        parser.error("--iterations and --repetitions must be at least 1")
+    config = bench_config(args.overrides)
+    result = live_cost(config, args.iterations, args.repetitions, args.viewer)
+    print(f"frames/s, live view off: {' '.join(f'{r:.0f}' for r in result.off)}")
+    print(f"frames/s, live view on:  {' '.join(f'{r:.0f}' for r in result.on)}")
+    for name, ratio in (("wall time", result.ratio), ("CPU time", result.cpu_ratio)):
+        print(f"frames/s per {name}, median on / off: {ratio:.3f} (cost "
+              f"{100 * (1 - ratio):.1f} %; target at most {100 * _TARGET:.0f} %)")
+    sys.stdout.flush()
+
+
+if __name__ == "__main__":
+    main()

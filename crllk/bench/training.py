@@ -1,0 +1,70 @@
+"""Training throughput next to environment-only throughput, measured in one process.
+
+Training frames/s counts a whole iteration of :mod:`crllk.train` (collection with the policy,
+GAE for reward and costs, PPO epochs); the bound is the same batched environment stepped with
+random actions and no networks. DESIGN.md §7 asks for a ratio of at least 0.5 (state).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+from hydra import compose, initialize_config_module
+
+import crllk  # noqa: F401  (headless GL before torchrl)
+from crllk.rl.rollout import collect
+from crllk.training.build import build_run
+from crllk.training.config import TrainConfig, validate
+from crllk.training.updates import ppo_update, shape_signals
+
+
+@dataclass(frozen=True)
+class TrainingRates:
+    """Frames per second of training and of the environment alone, with their ratio."""
+
+    training: float
+    environment: float
+
+    @property
+    def ratio(self) -> float:
+        return self.training / self.environment
+
+
+def bench_config(overrides: Sequence[str] = ()) -> TrainConfig:
+    """The trainer's default configuration with Hydra-style ``overrides``."""
+    with initialize_config_module(config_module="crllk.conf", version_base="1.3"):
+        return validate(compose(config_name="train", overrides=list(overrides)))
+
+
+def training_rates(config: TrainConfig, iterations: int = 5) -> TrainingRates:
+    """Times ``iterations`` training iterations and as many environment-only steps."""
+    env, learner, multipliers, generator = build_run(config)
+    carry = env.reset()
+
+    def iterate(td):
+        batch, td = collect(env, learner.actor, td, config.rollout_steps)
+        learner.loss.set_multipliers([m.value for m in multipliers.values()])
+        shape_signals(batch, config, env.config.off_road_lane_cost)
+        ppo_update(learner, batch, config, generator)
+        return td
+
+    carry = iterate(carry)  # warm-up
+    start = time.perf_counter()
+    for _ in range(iterations):
+        carry = iterate(carry)
+    training = iterations * config.frames_per_batch / (time.perf_counter() - start)
+
+    steps = iterations * config.rollout_steps
+    td = env.reset()
+    start = time.perf_counter()
+    for _ in range(steps):
+        td["action"] = env.action_spec.rand()
+        _, td = env.step_and_maybe_reset(td)
+    environment = steps * config.num_envs / (time.perf_counter() - start)
+    env.close()
+    return TrainingRates(training=training, environment=environment)
+
+
+__all__ = ["TrainingRates", "bench_config", "training_rates"]

@@ -1,0 +1,131 @@
+"""An evaluation as a document: the paper's metrics, breakdowns, one row per episode; and mean ±
+std across runs."""
+
+from __future__ import annotations
+
+from collections import Counter
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from crllk.envs.episodes import summarise
+from crllk.rl.rollout import EvaluationResult
+from crllk.tasks.actions import DISCRETE_NAMES
+
+DEFAULT_SEED = 1_000_000
+"""Spawn seed of evaluations without a run (the follower), as ``eval.seed`` of training."""
+
+
+CONTINUOUS_BINS = np.linspace(-1.0, 1.0, 11)
+"""Edges of the continuous action histogram (velocity and steering lie in [-1, 1])."""
+
+
+METRICS = ("J_R", "J_clane", "J_coll", "episode_length")
+
+
+def action_histogram(actions: Sequence[np.ndarray], action: str) -> dict[str, Any]:
+    """Discrete: the fraction of steps per action; continuous (and duty): counts per bin of
+    each action component over :data:`CONTINUOUS_BINS`."""
+    flat = np.concatenate([np.asarray(a).reshape(len(a), -1) for a in actions])
+    if action == "discrete":
+        counts = np.bincount(flat[:, 0].astype(np.int64), minlength=len(DISCRETE_NAMES))
+        return {name: float(c / counts.sum()) for name, c in zip(DISCRETE_NAMES, counts,
+                                                                   strict=True)}
+    names = ("left", "right") if action == "duty" else ("velocity", "steering")
+    return {"bin_edges": CONTINUOUS_BINS.tolist(),
+            **{name: np.histogram(np.clip(flat[:, k], -1, 1), CONTINUOUS_BINS)[0].tolist()
+               for k, name in enumerate(names)},
+            **{f"{name}_mean": float(flat[:, k].mean()) for k, name in enumerate(names)}}
+
+
+def episode_rows(result: EvaluationResult, action: str) -> list[dict[str, Any]]:
+    rows = []
+    for k, (stats, termination, actions) in enumerate(
+            zip(result.episodes, result.terminations, result.actions, strict=True)):
+        reason = termination or ("time_limit" if stats.truncated else None)
+        row = {"episode": k, **stats.as_row(), "termination": reason,
+               "direction": _at(result.directions, k), "hit_object": _at(result.hit_objects, k)}
+        if action == "discrete":
+            counts = np.bincount(np.asarray(actions).reshape(-1).astype(np.int64),
+                                 minlength=len(DISCRETE_NAMES))
+            row["actions"] = dict(zip(DISCRETE_NAMES, counts.tolist(), strict=True))
+        rows.append(row)
+    return rows
+
+
+def _at(values: Sequence[Any], k: int) -> Any:
+    return values[k] if k < len(values) else None
+
+
+def breakdown(result: EvaluationResult, objects: Sequence[Any] = ()) -> dict[str, Any]:
+    """The metrics per start direction of the loop, and how many episodes ended on each
+    obstacle (``objects``: the map's, to name them by kind and position)."""
+    by_direction = {}
+    for direction in ("intended", "reverse"):
+        chosen = [e for e, d in zip(result.episodes, result.directions, strict=True)
+                  if d == direction]
+        if chosen:
+            by_direction[direction] = summarise(chosen).as_row()
+    hits: dict[str, int] = {}
+    for index in result.hit_objects:
+        if index is not None:
+            obj = objects[index] if index < len(objects) else None
+            name = f"{index}" if obj is None else f"{index} {obj.kind} ({obj.x:.2f}, {obj.y:.2f})"
+            hits[name] = hits.get(name, 0) + 1
+    return {"by_direction": by_direction, "collisions_by_object": dict(sorted(hits.items()))}
+
+
+def result_document(result: EvaluationResult, action: str, *, thresholds: dict[str, float],
+                    settings: dict[str, Any], source: dict[str, Any],
+                    objects: Sequence[Any] = ()) -> dict[str, Any]:
+    """The ``eval.json`` content of one evaluation (``objects``: the map's, named in the
+    breakdown of collisions)."""
+    s = result.summary
+    rows = episode_rows(result, action)
+    summary = {"J_R": s.J_R, "J_clane": s.J_clane, "J_coll": s.J_coll,
+               "episode_length": s.length,
+               "satisfied": bool(s.J_clane <= thresholds["lane"]
+                                 and s.J_coll <= thresholds["collision"])}
+    return {"source": source, "evaluation": settings, "thresholds": thresholds,
+            "summary": summary, "action_histogram": action_histogram(result.actions, action),
+            "terminations": dict(Counter(row["termination"] for row in rows)),
+            "breakdown": breakdown(result, objects),
+            "episodes": rows}
+
+
+def aggregate(documents: Sequence[dict[str, Any]]) -> dict[str, Any]:
+    """Mean and standard deviation (population, ddof 0) across runs of each metric, with
+    the per-run values."""
+    out: dict[str, Any] = {"runs": [d["source"].get("run_dir") for d in documents]}
+    for metric in METRICS:
+        values = [float(d["summary"][metric]) for d in documents]
+        out[metric] = {"mean": float(np.mean(values)), "std": float(np.std(values)),
+                       "values": values}
+    out["satisfied"] = [bool(d["summary"]["satisfied"]) for d in documents]
+    return out
+
+
+def format_summary(document: dict[str, Any]) -> str:
+    s, src = document["summary"], document["source"]
+    name = src.get("run_dir") or f"{src['algo']} on {src['task']}"
+    verdict = "both constraints hold" if s["satisfied"] else "constraints violated"
+    text = (f"{name}: {document['evaluation']['episodes']} episodes: J_R {s['J_R']:.2f} m, "
+            f"J_clane {s['J_clane']:.3f} dm, J_coll {s['J_coll']:.3f}, "
+            f"length {s['episode_length']:.0f}: {verdict}")
+    split = document.get("breakdown", {})
+    for direction, row in split.get("by_direction", {}).items():
+        text += (f"\n  started {direction}: {row['episodes']} episodes, J_clane "
+                 f"{row['J_clane']:.3f} dm, J_coll {row['J_coll']:.3f}")
+    if split.get("collisions_by_object"):
+        text += "\n  ended on: " + ", ".join(f"{obstacle} ×{count}" for obstacle, count
+                                            in split["collisions_by_object"].items())
+    return text
+
+
+def format_aggregate(result: dict[str, Any]) -> str:
+    def show(metric: str, digits: int) -> str:
+        return f"{result[metric]['mean']:.{digits}f} ± {result[metric]['std']:.{digits}f}"
+
+    return (f"{len(result['runs'])} runs: J_R {show('J_R', 2)} m, J_clane {show('J_clane', 3)} "
+            f"dm, J_coll {show('J_coll', 3)}")

@@ -1,0 +1,89 @@
+"""Evaluating trained runs and the scripted drivers, and recording them."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+from crllk.envs.batched import make_env
+from crllk.evaluation.report import DEFAULT_SEED, result_document
+from crllk.files import atomic_write_text
+from crllk.rl.rollout import run_episodes
+from crllk.tasks.follower import FollowerPolicy
+from crllk.training.build import build_env
+from crllk.training.runs import EVAL_FILE, load_actor, load_run_config
+
+
+def evaluate_run(run_dir: str | Path, *, episodes: int, deterministic: bool = False,
+                 seed: int | None = None, num_envs: int = 10) -> dict[str, Any]:
+    """Plays the run's checkpoint and writes ``<run_dir>/eval.json``; returns its content."""
+    config = load_run_config(run_dir)
+    seed = config.eval.seed if seed is None else seed
+    env = build_env(config, num_envs=num_envs, seed=seed)
+    try:
+        actor, info = load_actor(run_dir, env)
+        result = run_episodes(env, actor, episodes, deterministic=deterministic,
+                              sample_seed=seed)
+    finally:
+        env.close()
+    source = {"run_dir": str(run_dir), "task": config.task_name, "algo": config.algo.name,
+              "action": config.action.name, "obs": config.obs.name, "train_seed": config.seed,
+              **info}
+    settings = {"episodes": episodes, "seed": seed, "num_envs": num_envs,
+                "deterministic": deterministic}
+    thresholds = {"lane": config.algo.lane.threshold,
+                  "collision": config.algo.collision.threshold}
+    document = result_document(result, config.action.name, thresholds=thresholds,
+                               settings=settings, source=source,
+                               objects=env.config.map.objects)
+    atomic_write_text(Path(run_dir) / EVAL_FILE, json.dumps(document, indent=1) + "\n")
+    return document
+
+
+def evaluate_follower(task: str | Path, *, episodes: int, seed: int = DEFAULT_SEED,
+                      num_envs: int = 10, thresholds: dict[str, float] | None = None,
+                      avoid_obstacles: bool = False) -> dict[str, Any]:
+    """The scripted lane follower through the same episodes and metrics as a run; with
+    ``avoid_obstacles`` the training teacher, which swerves around obstacles."""
+    env = make_env(task, num_envs=num_envs, observation="state", action="duty", seed=seed)
+    try:
+        result = run_episodes(env, FollowerPolicy(env, avoid_obstacles=avoid_obstacles),
+                              episodes)
+    finally:
+        env.close()
+    objects = env.config.map.objects
+    return result_document(
+        result, "duty", thresholds=thresholds or {"lane": 0.5, "collision": 0.02},
+        settings={"episodes": episodes, "seed": seed, "num_envs": num_envs,
+                  "deterministic": True},
+        source={"task": str(task), "algo": "teacher" if avoid_obstacles else "follower",
+                "action": "duty", "obs": "state"},
+        objects=objects)
+
+
+def record_run(run_dir: str | Path, *, episodes: int, seed: int | None = None,
+               deterministic: bool = True, viewer: str = "none") -> Path:
+    """Records ``episodes`` evaluation episodes of the run's policy (from the same spawn seed as
+    :func:`evaluate_run`) to ``<run_dir>/recordings/eval.rrd``; returns the path.
+
+    Raises:
+        crllk.errors.RecordingError: if the file cannot be written (a ConfigError).
+    """
+    from crllk.recording.recorder import record_episodes
+
+    config = load_run_config(run_dir)
+    env = build_env(config, num_envs=1, seed=config.eval.seed if seed is None else seed)
+    path = Path(run_dir) / "recordings" / "eval.rrd"
+    try:
+        actor, info = load_actor(run_dir, env)
+        report = record_episodes(env, actor, episodes, path, deterministic=deterministic,
+                                 viewer=viewer, multipliers=info["multipliers"],
+                                 recording_id=f"crllk-eval-{Path(run_dir).resolve()}")
+    finally:
+        env.close()
+    for message in report.warnings:
+        print(f"warning: {message}", file=sys.stderr, flush=True)
+    print(f"recording: {path} ({report.episodes} episodes, {report.steps} steps)", flush=True)
+    return path

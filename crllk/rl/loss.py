@@ -1,0 +1,451 @@
+"""Lagrangian PPO: the PPO clip loss on an advantage that combines a reward and cost critics.
+
+For costs C_1..C_n with multipliers λ_i >= 0 the policy maximises the Lagrangian
+J_R − Σ_i λ_i J_Ci. Its advantage is combined from one GAE per signal and normalised::
+
+    A = (A_r − Σ_i λ_i A_ci) / (1 + Σ_i λ_i)
+
+Dividing by 1 + Σλ keeps the advantage (and so the step size) of the same order however large λ
+grows, when advantages are used as they are; the direction is that of the penalised reward
+r − Σ λ_i c_i. With ``normalize_advantage`` (the trainer's default) the combined advantage is
+standardised per minibatch, which undoes any positive scale: the division then changes nothing,
+and the multipliers alone set the balance between reward and costs. Advantages are computed
+outside the loss, by the GAE modules of :func:`make_advantage_modules`; the multipliers are
+updated outside it too (:mod:`crllk.rl.lagrange`) and handed over with :meth:`set_multipliers`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field, make_dataclass
+from typing import Any
+
+import torch
+from tensordict import TensorDict, TensorDictBase
+from tensordict.nn import TensorDictModule
+from tensordict.utils import NestedKey
+from torch import nn
+from torch.distributions import Distribution
+from torchrl.modules import ProbabilisticActor, TanhNormal
+from torchrl.objectives import LossModule
+from torchrl.objectives.value import GAE
+
+_ADVANTAGE_STD_EPS = 1e-6  # floor of the advantage std when standardising (advantage units)
+_TEACHER_MARGIN = 1e-3  # continuous teacher actions are clamped this far inside [-1, 1]
+
+
+def cost_reward_key(name: str) -> str:
+    """The per-step cost entry of cost ``name``, read by GAE from ``("next", key)``."""
+    return f"cost_{name}"
+
+
+def _cost_key_defaults(name: str) -> dict[str, str]:
+    """Accepted-key field name -> default tensordict key, for one cost."""
+    return {
+        f"advantage_{name}": f"advantage_{name}",
+        f"value_target_{name}": f"value_target_{name}",
+        f"value_{name}": f"state_value_{name}",
+    }
+
+
+class LagrangianPPOLoss(LossModule):
+    """PPO clip loss on the λ-combined advantage, with a value loss for every critic.
+
+    Per sample, with ratio ρ = π_θ(a|s) / π_old(a|s) and the combined advantage A above
+    (optionally standardised over the batch when ``normalize_advantage``)::
+
+        loss_objective   = −mean(min(ρ·A, clip(ρ, 1−ε, 1+ε)·A))
+        loss_critic      = c_v · mean((V_r(s) − G_r)²)
+        loss_cost_critic = c_v · Σ_i mean((V_ci(s) − G_ci)²)
+        loss_entropy     = −c_H · mean(H[π_θ(·|s)])
+        loss_imitation   = −c_I · mean(log π_θ(a_teacher|s))
+
+The imitation term pulls the policy towards a teacher's action ``teacher_action`` recorded for
+each state (:mod:`crllk.tasks.teacher`); its weight c_I (``imitation_coeff``, settable between
+updates like the multipliers) is 0 by default, and then the term is 0 and needs no teacher key.
+For a tanh-Gaussian policy the term moves only the mean: the scale enters it detached, because a
+scripted teacher says what to do, not how sure the policy should be, and its corrections at the
+edge of the box (atanh of nearly ±1) would otherwise inflate the policy's noise.
+
+    The sum of the ``loss_*`` entries is the quantity to minimise. Diagnostics (detached):
+    ``entropy``, ``kl_approx`` = mean((ρ − 1) − log ρ) (the non-negative "k3" estimator, where
+    TorchRL's ``ClipPPOLoss`` reports mean(−log ρ)), ``clip_fraction``, ``explained_variance``
+    and ``explained_variance_<cost>``. With all λ = 0 the objective and entropy terms equal
+    TorchRL's ``ClipPPOLoss`` on the same data.
+
+    Keys (see ``set_keys``): ``advantage``, ``value_target``, ``value``, ``sample_log_prob``,
+    ``action``, and per cost ``advantage_<cost>``, ``value_target_<cost>``, ``value_<cost>``
+    (defaults ``"advantage_<cost>"``, ``"value_target_<cost>"``, the critic's output key). A
+    value entry may have the batch shape or the batch shape plus a trailing 1.
+
+    Args:
+        actor_network: A single-head probabilistic actor (``get_dist`` on a tensordict).
+        critic_network: Reward critic writing one value key.
+        cost_critics: One critic per cost, by cost name (an identifier); the order fixes the
+            order of ``lagrange``. Every critic must write its own value key.
+        clip_epsilon: ε of the ratio clip.
+        entropy_coeff: c_H.
+        critic_coeff: c_v, shared by reward and cost critics.
+        normalize_advantage: standardise the combined advantage over the batch.
+        lagrange: initial multipliers λ (zeros by default).
+    """
+
+    @dataclass
+    class _AcceptedKeys:
+        """Tensordict keys read by the loss; per-cost fields are added for each instance."""
+
+        advantage: NestedKey = "advantage"
+        value_target: NestedKey = "value_target"
+        value: NestedKey = "state_value"
+        sample_log_prob: NestedKey = "action_log_prob"
+        action: NestedKey = "action"
+        teacher_action: NestedKey = "teacher_action"
+
+    default_keys = _AcceptedKeys
+    tensor_keys: _AcceptedKeys
+    _schedulable_buffers = frozenset({"clip_epsilon", "entropy_coeff", "critic_coeff",
+                                      "imitation_coeff"})
+
+    actor_network: ProbabilisticActor
+    critic_network: TensorDictModule
+    cost_critics: nn.ModuleDict
+
+    def __init__(
+        self,
+        actor_network: ProbabilisticActor,
+        critic_network: TensorDictModule,
+        cost_critics: Mapping[str, TensorDictModule],
+        *,
+        clip_epsilon: float = 0.2,
+        entropy_coeff: float = 0.01,
+        critic_coeff: float = 1.0,
+        normalize_advantage: bool = False,
+        lagrange: Sequence[float] | None = None,
+    ) -> None:
+        super().__init__()
+        self.cost_names: tuple[str, ...] = _check_cost_names(tuple(cost_critics))
+        self.actor_network = actor_network
+        self.critic_network = critic_network
+        self.cost_critics = nn.ModuleDict(dict(cost_critics))
+        self._init_keys()
+        if not 0.0 < clip_epsilon < 1.0:
+            raise ValueError(f"clip_epsilon must lie in (0, 1), got {clip_epsilon}")
+        self.register_coeff_buffer("clip_epsilon", clip_epsilon)
+        self.register_coeff_buffer("entropy_coeff", entropy_coeff)
+        self.register_coeff_buffer("critic_coeff", critic_coeff)
+        self.register_coeff_buffer("imitation_coeff", 0.0)
+        self.normalize_advantage = normalize_advantage
+        self.register_buffer("lagrange", torch.zeros(len(self.cost_names)))
+        if lagrange is not None:
+            self.set_multipliers(lagrange)
+
+    @property
+    def functional(self) -> bool:
+        """The networks are used as they are (no functional parameter copies)."""
+        return False
+
+    # ---------------------------------------------------------------- keys
+
+    def _init_keys(self) -> None:
+        """Builds this instance's accepted keys: the fixed ones plus three per cost."""
+        fields = [
+            (name, NestedKey, field(default=default))
+            for cost in self.cost_names
+            for name, default in _cost_key_defaults(cost).items()
+        ]
+        keys_class = make_dataclass(
+            "_AcceptedKeys", fields, bases=(LagrangianPPOLoss._AcceptedKeys,)
+        )
+        self._AcceptedKeys = keys_class
+        self.default_keys = keys_class
+        self._tensor_keys = keys_class()
+        self._take_keys_from_networks()
+
+    def _take_keys_from_networks(self) -> None:
+        """Reads action, log-prob and value keys from the networks, as TorchRL's PPO does."""
+        log_prob_keys = getattr(self.actor_network, "log_prob_keys", [])
+        sample_keys = getattr(self.actor_network, "dist_sample_keys", [])
+        if len(log_prob_keys) == 1 and len(sample_keys) == 1:
+            self.set_keys(sample_log_prob=log_prob_keys[0], action=sample_keys[0])
+        critics = {"value": self.critic_network}
+        critics.update({f"value_{name}": self.cost_critics[name] for name in self.cost_names})
+        for field_name, critic in critics.items():
+            out_keys = getattr(critic, "out_keys", [])
+            if len(out_keys) == 1:
+                self.set_keys(**{field_name: out_keys[0]})
+        value_keys = [getattr(self.tensor_keys, name) for name in critics]
+        if len(set(value_keys)) != len(value_keys):
+            raise ValueError(
+                f"every critic must write its own value key, got {value_keys}; e.g. "
+                "ValueOperator(net, in_keys=[...], out_keys=['state_value_lane'])"
+            )
+
+    def _forward_value_estimator_keys(self, **kwargs: Any) -> None:
+        """No value estimator lives inside this loss; advantages come precomputed."""
+
+    def cost_keys(self, name: str) -> tuple[NestedKey, NestedKey, NestedKey]:
+        """(advantage, value target, value) keys of cost ``name``."""
+        keys = self.tensor_keys
+        return (
+            getattr(keys, f"advantage_{name}"),
+            getattr(keys, f"value_target_{name}"),
+            getattr(keys, f"value_{name}"),
+        )
+
+    @property
+    def in_keys(self) -> list[NestedKey]:
+        keys = [*self.actor_network.in_keys, *self.critic_network.in_keys]
+        for critic in self.cost_critics.values():
+            keys += critic.in_keys
+        k = self.tensor_keys
+        keys += [k.action, k.sample_log_prob, k.advantage, k.value_target]
+        for name in self.cost_names:
+            keys += self.cost_keys(name)[:2]
+        return list(dict.fromkeys(keys))
+
+    @property
+    def out_keys(self) -> list[str]:
+        names = ["loss_objective", "loss_critic", "loss_cost_critic", "loss_entropy",
+                 "loss_imitation"]
+        names += ["entropy", "kl_approx", "clip_fraction", "explained_variance"]
+        return names + [f"explained_variance_{name}" for name in self.cost_names]
+
+    # ---------------------------------------------------------- multipliers
+
+    def set_multipliers(self, values: Sequence[float] | Mapping[str, float] | torch.Tensor) -> None:
+        """Copies λ into the ``lagrange`` buffer (in ``cost_names`` order, or by name).
+
+        Raises:
+            ValueError: on a wrong number of values, unknown names or negative / non-finite λ.
+        """
+        if isinstance(values, Mapping):
+            if set(values) != set(self.cost_names):
+                raise ValueError(f"multipliers must name {self.cost_names}, got {sorted(values)}")
+            values = [values[name] for name in self.cost_names]
+        tensor = torch.as_tensor(values, dtype=self.lagrange.dtype).reshape(-1)
+        if tensor.numel() != len(self.cost_names):
+            raise ValueError(
+                f"expected {len(self.cost_names)} multipliers {self.cost_names}, "
+                f"got {tensor.numel()}"
+            )
+        if not torch.isfinite(tensor).all() or (tensor < 0).any():
+            raise ValueError(f"multipliers must be finite and >= 0, got {tensor.tolist()}")
+        self.lagrange.copy_(tensor)
+
+    @property
+    def multipliers(self) -> dict[str, float]:
+        """Current λ by cost name."""
+        return dict(zip(self.cost_names, self.lagrange.tolist(), strict=True))
+
+    # ------------------------------------------------------------ the loss
+
+    def combined_advantage(self, tensordict: TensorDictBase) -> torch.Tensor:
+        """A = (A_r − Σ_i λ_i A_ci) / (1 + Σ_i λ_i), standardised if asked; shape [*B, 1]."""
+        batch_shape = tensordict.batch_size
+        advantage = _column(_get(tensordict, self.tensor_keys.advantage), batch_shape)
+        penalty = torch.zeros_like(advantage)
+        for weight, name in zip(self.lagrange, self.cost_names, strict=True):
+            cost_key = self.cost_keys(name)[0]
+            penalty = penalty + weight * _column(_get(tensordict, cost_key), batch_shape)
+        combined = ((advantage - penalty) / (1.0 + self.lagrange.sum())).detach()
+        if self.normalize_advantage and combined.numel() > 1:
+            combined = (combined - combined.mean()) / combined.std().clamp_min(
+                _ADVANTAGE_STD_EPS
+            )
+        return combined
+
+    def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
+        """Computes the losses and diagnostics on a batch of transitions (see class docs)."""
+        td = tensordict.clone(False)  # the networks write their outputs here, not in the input
+        advantage = self.combined_advantage(td)
+        log_ratio, dist = self._log_ratio(td)
+        loss_objective, clip_fraction = self._clip_objective(log_ratio, advantage)
+        entropy = _entropy(dist)
+        self._evaluate_critics(td)
+        loss_critic, explained = self._value_loss(
+            td, self.tensor_keys.value, self.tensor_keys.value_target
+        )
+        out = {
+            "loss_objective": loss_objective,
+            "loss_critic": loss_critic,
+            "loss_cost_critic": torch.zeros_like(loss_critic),
+            "loss_entropy": -self.entropy_coeff * entropy.mean(),
+            "loss_imitation": self._imitation_loss(td, dist),
+            "entropy": entropy.detach().mean(),
+            "kl_approx": (log_ratio.exp() - 1.0 - log_ratio).detach().mean(),
+            "clip_fraction": clip_fraction,
+            "explained_variance": explained,
+        }
+        for name in self.cost_names:
+            _, target_key, value_key = self.cost_keys(name)
+            loss, explained = self._value_loss(td, value_key, target_key)
+            out["loss_cost_critic"] = out["loss_cost_critic"] + loss
+            out[f"explained_variance_{name}"] = explained
+        return TensorDict(out, batch_size=[])
+
+    def set_imitation_coeff(self, value: float) -> None:
+        """Sets c_I, the weight of the imitation term (0 switches it off)."""
+        if not (value >= 0.0 and math.isfinite(value)):
+            raise ValueError(f"imitation_coeff must be finite and >= 0, got {value}")
+        self.imitation_coeff.fill_(value)
+
+    def _imitation_loss(self, td: TensorDictBase, dist: Distribution) -> torch.Tensor:
+        """−c_I · mean(log π_θ(a_teacher|s)); 0 when c_I is 0. Continuous teacher actions are
+        kept just inside the box, where a tanh-squashed policy's density is finite, and the
+        tanh-Gaussian's scale is detached (the term trains its mean only)."""
+        if float(self.imitation_coeff) == 0.0:
+            return torch.zeros((), dtype=self.imitation_coeff.dtype)
+        target = _get(td, self.tensor_keys.teacher_action)
+        if target.is_floating_point():
+            target = target.clamp(-1.0 + _TEACHER_MARGIN, 1.0 - _TEACHER_MARGIN)
+        if isinstance(dist, TanhNormal):
+            dist = TanhNormal(dist.loc, dist.scale.detach(), upscale=dist.upscale, low=dist.low,
+                              high=dist.high, tanh_loc=dist.tanh_loc)
+        return -self.imitation_coeff * dist.log_prob(target).mean()
+
+    def _log_ratio(self, td: TensorDictBase) -> tuple[torch.Tensor, Distribution]:
+        """log ρ = log π_θ(a|s) − log π_old(a|s), shape [*B, 1], and the current π_θ."""
+        dist = self.actor_network.get_dist(td)
+        log_prob = dist.log_prob(_get(td, self.tensor_keys.action).detach())
+        old_log_prob = _get(td, self.tensor_keys.sample_log_prob).detach()
+        return _column(log_prob - old_log_prob, td.batch_size), dist
+
+    def _clip_objective(
+        self, log_ratio: torch.Tensor, advantage: torch.Tensor
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """−mean(min(ρ·A, clip(ρ, 1−ε, 1+ε)·A)) and the fraction of clipped ratios."""
+        bounds = ((-self.clip_epsilon).log1p(), self.clip_epsilon.log1p())
+        clipped = log_ratio.clamp(*bounds)
+        gain = torch.minimum(log_ratio.exp() * advantage, clipped.exp() * advantage)
+        clip_fraction = (clipped != log_ratio).to(log_ratio.dtype).mean().detach()
+        return -gain.mean(), clip_fraction
+
+    def _evaluate_critics(self, td: TensorDictBase) -> None:
+        """Runs every distinct critic once on ``td``; one network with several value heads
+        (shared by the reward and the costs) runs only once."""
+        seen: set[int] = set()
+        for critic in (self.critic_network, *self.cost_critics.values()):
+            if id(critic) not in seen:
+                seen.add(id(critic))
+                critic(td)
+
+    def _value_loss(
+        self, td: TensorDictBase, value_key: NestedKey, target_key: NestedKey
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """c_v · mean((V(s) − G)²) and the explained variance 1 − Var(G − V) / Var(G)."""
+        target = _column(_get(td, target_key), td.batch_size).detach()
+        value = _column(_get(td, value_key), td.batch_size)
+        loss = self.critic_coeff * (value - target).pow(2).mean()
+        return loss, explained_variance(value.detach(), target)
+
+
+def explained_variance(prediction: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+    """1 − Var(target − prediction) / Var(target) over all elements (1 is perfect, 0 useless)."""
+    eps = torch.finfo(target.dtype).eps
+    residual = torch.var(target - prediction, correction=0)
+    return 1.0 - residual / (torch.var(target, correction=0) + eps)
+
+
+def _entropy(dist: Distribution) -> torch.Tensor:
+    """Analytic entropy per sample, or a one-sample estimate −log π(x), x ~ π, without one."""
+    try:
+        entropy = dist.entropy()
+    except NotImplementedError:  # e.g. TanhNormal
+        entropy = None
+    if entropy is None or not torch.isfinite(entropy).all():
+        sample = dist.rsample() if dist.has_rsample else dist.sample()
+        entropy = -dist.log_prob(sample)
+    return entropy
+
+
+def _get(td: TensorDictBase, key: NestedKey) -> torch.Tensor:
+    value = td.get(key, None)
+    if value is None:
+        raise KeyError(
+            f"the loss needs the entry {key!r}, which the batch lacks (advantages and value "
+            "targets come from make_advantage_modules; renamed keys go through set_keys)"
+        )
+    return value
+
+
+def _column(value: torch.Tensor, batch_shape: torch.Size) -> torch.Tensor:
+    """Returns ``value`` with shape [*batch_shape, 1] (accepts [*B] or [*B, 1])."""
+    if value.shape == batch_shape:
+        return value.unsqueeze(-1)
+    if value.shape == (*batch_shape, 1):
+        return value
+    expected = f"{[*batch_shape]} or {[*batch_shape, 1]}"
+    raise ValueError(f"expected an entry of shape {expected}, got {[*value.shape]}")
+
+
+def _check_cost_names(names: tuple[str, ...]) -> tuple[str, ...]:
+    for name in names:
+        if not (isinstance(name, str) and name.isidentifier()):
+            raise ValueError(f"cost names must be Python identifiers, got {name!r}")
+    return names
+
+
+@dataclass(frozen=True)
+class AdvantageModules:
+    """One TorchRL ``GAE`` for the reward and one per cost; calling it runs them all."""
+
+    reward: GAE
+    costs: dict[str, GAE]
+
+    @torch.no_grad()
+    def __call__(self, tensordict: TensorDictBase) -> TensorDictBase:
+        """Writes every advantage and value target into ``tensordict`` (shape [*B, T])."""
+        self.reward(tensordict)
+        for module in self.costs.values():
+            module(tensordict)
+        return tensordict
+
+
+def make_advantage_modules(
+    gamma: float,
+    lmbda: float,
+    critic_network: TensorDictModule,
+    cost_critics: Mapping[str, TensorDictModule],
+    *,
+    keys: LagrangianPPOLoss._AcceptedKeys | None = None,
+    average_gae: bool = False,
+) -> AdvantageModules:
+    """GAE(γ, λ_GAE) for the reward and for each cost, writing the keys the loss reads.
+
+    Per signal x (reward, or cost c_i read from ``("next", "cost_<name>")``)::
+
+        δ_t = x_t + γ (1 − terminated_t) V(s_{t+1}) − V(s_t)
+        A_t = δ_t + γ λ_GAE (1 − done_t) A_{t+1},      G_t = A_t + V(s_t)
+
+    Args:
+        gamma: Discount γ.
+        lmbda: GAE λ.
+        critic_network: Reward critic.
+        cost_critics: Cost critics by name, as given to the loss.
+        keys: The loss's ``tensor_keys`` (so that renamed keys agree); defaults as the loss's.
+        average_gae: Standardise each advantage (leave ``False`` to combine them unscaled).
+    """
+    if not (0.0 <= gamma <= 1.0 and 0.0 <= lmbda <= 1.0) or math.isnan(gamma + lmbda):
+        raise ValueError(f"gamma and lmbda must lie in [0, 1], got {gamma}, {lmbda}")
+    names = _check_cost_names(tuple(cost_critics))
+    reward = GAE(gamma=gamma, lmbda=lmbda, value_network=critic_network, average_gae=average_gae)
+    reward.set_keys(
+        value=critic_network.out_keys[0] if keys is None else keys.value,
+        advantage="advantage" if keys is None else keys.advantage,
+        value_target="value_target" if keys is None else keys.value_target,
+    )
+    costs = {}
+    for name in names:
+        critic = cost_critics[name]
+        if keys is None:
+            advantage, target = f"advantage_{name}", f"value_target_{name}"
+            value = critic.out_keys[0]
+        else:
+            advantage, target, value = (getattr(keys, f) for f in _cost_key_defaults(name))
+        module = GAE(gamma=gamma, lmbda=lmbda, value_network=critic, average_gae=average_gae)
+        module.set_keys(
+            reward=cost_reward_key(name), value=value, advantage=advantage, value_target=target
+        )
+        costs[name] = module
+    return AdvantageModules(reward=reward, costs=costs)

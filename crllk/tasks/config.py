@@ -1,0 +1,195 @@
+"""Task settings: a map plus spawn, episode, motor and camera settings, read from YAML.
+
+A task file (``tasks/<name>.yaml``) holds ``map:`` (a Duckietown map) and any of the sections
+below; a bare Duckietown map file is a task with default settings. Every value is checked and a
+bad one raises :class:`~crllk.errors.ConfigError` naming the file and the field.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import typing
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from crllk.errors import ConfigError
+from crllk.files import read_yaml
+from crllk.maps import DuckietownMap, load_map
+from crllk.paths import task_file, task_names
+from crllk.sim.constants import PHYSICS_TIMESTEP
+from crllk.sim.motor import MotorConfig
+
+
+@dataclass(frozen=True)
+class SpawnConfig:
+    """Where episodes start: a random drivable tile and direction, near the lane centre."""
+
+    lateral_offset: tuple[float, float] = (-0.04, 0.04)
+    """Range of the start's offset from the lane centre (m)."""
+    heading_error: tuple[float, float] = (-0.25, 0.25)
+    """Range of the start's heading error (rad)."""
+    obstacle_clearance: float = 0.25
+    """Least distance between the robot's footprint and any obstacle's footprint (m)."""
+    encounters: float = 0.0
+    """Probability that an episode starts in front of an obstacle that blocks its lane
+    (trainers raise it to meet obstacles more often; evaluation keeps the task's own)."""
+    encounter_distance: tuple[float, float] = (0.3, 1.2)
+    """Range of the distance (m) along the lane from such a start to the obstacle."""
+    encounter_lateral_offset: tuple[float, float] = (-0.25, 0.04)
+    """Range of such a start's offset from the lane centre (m, positive right): wider than
+    ``lateral_offset``, so that some starts are already beside the obstacle's left side."""
+    encounter_horizon: int = 0
+    """Control steps after which an episode that started in front of an obstacle is truncated
+    (a positive number; unset, 0: the task's ``horizon``), so that training frames go to
+    passing obstacles. Applies to the batched environment (:mod:`crllk.envs.batched`)."""
+
+
+@dataclass(frozen=True)
+class CameraConfig:
+    """The robot camera as the policy sees it."""
+
+    height: int = 30
+    width: int = 40
+    supersample: int = 2
+    """Render this many times larger along each axis and average down (anti-aliasing)."""
+
+
+@dataclass(frozen=True)
+class TaskConfig:
+    """Everything that defines a lane-keeping task."""
+
+    name: str
+    map: DuckietownMap
+    source: str
+    horizon: int = 512
+    """Control steps per episode (a time limit: truncation, not termination)."""
+    control_rate: float = 30.0
+    """Control frequency (Hz)."""
+    off_road_lane_cost: float = 10.0
+    """Lane cost when off the road (dm)."""
+    spawn: SpawnConfig = field(default_factory=SpawnConfig)
+    motor: MotorConfig = field(default_factory=MotorConfig)
+    camera: CameraConfig = field(default_factory=CameraConfig)
+
+    @property
+    def control_timestep(self) -> float:
+        """Seconds per control step."""
+        return 1.0 / self.control_rate
+
+
+_PHYSICS_RATE = 1.0 / PHYSICS_TIMESTEP
+"""Physics steps per second (Hz)."""
+
+_SECTIONS = {"spawn": SpawnConfig, "motor": MotorConfig, "camera": CameraConfig}
+_SCALARS = ("horizon", "control_rate", "off_road_lane_cost")
+
+
+def load_task_config(task: str | Path, overrides: Mapping[str, Any] | None = None) -> TaskConfig:
+    """Read a task by name (a file in ``tasks/``) or by path (a task or map file).
+
+    ``overrides`` replaces settings, e.g. ``{"motor": {"delay": 0.0}, "horizon": 64}``.
+    """
+    path = Path(task)
+    if path.suffix not in (".yaml", ".yml"):
+        path = task_file(str(task))
+        if not path.exists():
+            raise ConfigError(task, "task", f"unknown task (known: {', '.join(task_names())}; "
+                              "or give the path of a task or map file)")
+    elif not path.exists():
+        raise ConfigError(path, "<file>", "no such file")
+    data = read_yaml(path)
+    if not isinstance(data, Mapping):
+        raise ConfigError(path, "<top>", "expected a mapping")
+    settings = dict(data) if "map" in data else {}
+    settings = _merge(settings, dict(overrides or {}))
+    dmap = load_map(path)
+    return parse_task(settings, name=str(settings.pop("name", path.stem)), dmap=dmap, source=path)
+
+
+def parse_task(settings: Mapping[str, Any], *, name: str, dmap: DuckietownMap,
+               source: str | Path) -> TaskConfig:
+    """Check task settings (all sections but ``map``) and build the :class:`TaskConfig`."""
+    kwargs: dict[str, Any] = {}
+    for key, value in settings.items():
+        if key == "map":
+            continue
+        if key in _SECTIONS:
+            kwargs[key] = _parse_section(_SECTIONS[key], value, source, key)
+        elif key in _SCALARS:
+            kwargs[key] = _check_value(TaskConfig, key, value, source, key)
+        else:
+            raise ConfigError(source, key, f"unknown setting (known: map, "
+                              f"{', '.join((*_SCALARS, *_SECTIONS))})")
+    config = TaskConfig(name=name, map=dmap, source=str(source), **kwargs)
+    if config.horizon <= 0:
+        raise ConfigError(source, "horizon", f"must be positive, got {config.horizon}")
+    if config.control_rate <= 0:
+        raise ConfigError(source, "control_rate", f"must be positive, got {config.control_rate}")
+    if config.spawn.encounters > 1:
+        raise ConfigError(source, "spawn.encounters",
+                          f"is a probability and must lie in [0, 1], got {config.spawn.encounters}")
+    if config.spawn.encounter_distance[0] < 0:
+        raise ConfigError(source, "spawn.encounter_distance",
+                          f"must be non-negative, got {list(config.spawn.encounter_distance)}")
+    substeps = _PHYSICS_RATE / config.control_rate
+    if abs(substeps - round(substeps)) > 1e-9:
+        raise ConfigError(source, "control_rate",
+                          f"{config.control_rate:g} Hz does not divide the {_PHYSICS_RATE:g} Hz "
+                          "physics rate (use e.g. 10, 15, 20, 30, 40, 60)")
+    return config
+
+
+def _merge(base: dict[str, Any], overrides: dict[str, Any]) -> dict[str, Any]:
+    out = dict(base)
+    for key, value in overrides.items():
+        if isinstance(value, Mapping) and isinstance(out.get(key), Mapping):
+            out[key] = _merge(dict(out[key]), dict(value))
+        else:
+            out[key] = value
+    return out
+
+
+def _parse_section(cls: type, value: Any, source: str | Path, where: str) -> Any:
+    if not isinstance(value, Mapping):
+        raise ConfigError(source, where, f"expected a mapping, got {value!r}")
+    names = {f.name for f in dataclasses.fields(cls)}
+    for key in value:
+        if key not in names:
+            raise ConfigError(source, f"{where}.{key}",
+                              f"unknown setting (known: {', '.join(sorted(names))})")
+    return cls(**{k: _check_value(cls, k, v, source, f"{where}.{k}") for k, v in value.items()})
+
+
+def _check_value(cls: type, name: str, value: Any, source: str | Path, where: str) -> Any:
+    hint = typing.get_type_hints(cls)[name]
+    if hint is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ConfigError(source, where, f"expected a whole number, got {value!r}")
+        if value <= 0:
+            raise ConfigError(source, where, f"must be positive, got {value}")
+        return value
+    if hint is float:
+        return _number(value, source, where, allow_negative=False)
+    if typing.get_origin(hint) is tuple:
+        if not isinstance(value, list | tuple) or len(value) != 2:
+            raise ConfigError(source, where, f"expected [low, high], got {value!r}")
+        low, high = (_number(v, source, where, allow_negative=True) for v in value)
+        if low > high:
+            raise ConfigError(source, where, f"low {low} is above high {high}")
+        return (low, high)
+    raise TypeError(f"unsupported setting type {hint!r}")  # pragma: no cover
+
+
+def _number(value: Any, source: str | Path, where: str, *, allow_negative: bool) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise ConfigError(source, where, f"expected a number, got {value!r}")
+    if not math.isfinite(value) or (value < 0 and not allow_negative):
+        raise ConfigError(source, where, f"must be a finite non-negative number, got {value!r}")
+    return float(value)
+
+
+__all__ = ["CameraConfig", "MotorConfig", "SpawnConfig", "TaskConfig", "load_task_config",
+           "parse_task"]

@@ -1,0 +1,100 @@
+"""The parts of a run: its environments, networks, loss, optimiser and multipliers."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+
+import crllk  # noqa: F401  (chooses the headless GL backend before torchrl imports mujoco)
+from crllk.envs.batched import BatchedLaneKeepingEnv, make_env
+from crllk.rl.lagrange import Multiplier, make_multiplier
+from crllk.rl.loss import AdvantageModules, LagrangianPPOLoss, make_advantage_modules
+from crllk.rl.models import ModelConfig, make_actor, make_critic, make_shared_critic
+from crllk.tasks.constraints import COSTS
+from crllk.tasks.lane_keeping import state_feature_names
+from crllk.training.config import TrainConfig
+
+
+@dataclass
+class Learner:
+    """The networks, the loss and the optimiser of one run."""
+
+    actor: torch.nn.Module
+    critics: dict[str, torch.nn.Module]  # "reward" and one per cost
+    loss: LagrangianPPOLoss
+    advantages: AdvantageModules
+    optimizer: torch.optim.Optimizer
+
+
+def build_env(config: TrainConfig, *, num_envs: int, seed: int,
+              training: bool = False) -> BatchedLaneKeepingEnv:
+    """The run's environment; the ``training`` one starts ``encounters`` of its episodes in
+    front of an obstacle, the others keep the task's own spawns."""
+    overrides = config.task_overrides()
+    if training and config.encounters > 0:
+        spawn = {**overrides.get("spawn", {}), "encounters": config.encounters}
+        if config.encounter_horizon:
+            spawn["encounter_horizon"] = config.encounter_horizon
+        overrides = {**overrides, "spawn": spawn}
+    return make_env(config.task_source(), num_envs=num_envs, observation=config.obs.name,
+                    action=config.action.name, seed=seed, overrides=overrides,
+                    privileged_state=config.model.critic_input == "state",
+                    teacher=training and (config.teacher.coeff > 0 or config.teacher.final > 0),
+                    commands=config.model.policy_commands)
+
+
+def build_learner(config: TrainConfig, env: BatchedLaneKeepingEnv) -> Learner:
+    obs = config.obs.name
+    shape = env.observation_spec[obs].shape[1:]
+    model = ModelConfig(**vars(config.model))
+    names = state_feature_names(env.config)
+    commands_dim = env.observation_spec["commands"].shape[-1] if model.policy_commands else 0
+    actor = make_actor(obs, shape, config.action.name, env.action_spec, model,
+                       names if obs == "state" else None, commands_dim=commands_dim)
+    value_keys = {"reward": "state_value", **{c: f"state_value_{c}" for c in COSTS}}
+    critic_obs = "state" if model.critic_input == "state" else obs
+    critic_shape = env.observation_spec[critic_obs].shape[1:]
+    critic_names = names if critic_obs == "state" else None
+    if model.shared_critic:
+        shared = make_shared_critic(critic_obs, critic_shape, model, list(value_keys.values()),
+                                    critic_names)
+        critics = dict.fromkeys(value_keys, shared)
+    else:
+        critics = {name: make_critic(critic_obs, critic_shape, model, out_key=key,
+                                     feature_names=critic_names)
+                   for name, key in value_keys.items()}
+    ppo = config.ppo
+    loss = LagrangianPPOLoss(actor, critics["reward"], {c: critics[c] for c in COSTS},
+                             clip_epsilon=ppo.clip_epsilon, entropy_coeff=ppo.entropy_coeff,
+                             critic_coeff=ppo.critic_coeff,
+                             normalize_advantage=ppo.normalize_advantage)
+    advantages = make_advantage_modules(ppo.gamma, ppo.gae_lambda, critics["reward"],
+                                        {c: critics[c] for c in COSTS}, keys=loss.tensor_keys)
+    optimizer = torch.optim.Adam(loss.parameters(), lr=ppo.lr)
+    return Learner(actor, critics, loss, advantages, optimizer)
+
+
+def build_multipliers(config: TrainConfig) -> dict[str, Multiplier]:
+    algo = config.algo
+    multipliers = {}
+    for name in COSTS:
+        c = getattr(algo, name)
+        common = {"threshold": c.threshold, "initial": c.initial, "max_value": c.max_value,
+                  "schedule": algo.schedule, "frozen": algo.frozen}
+        if algo.multiplier == "pid":
+            multipliers[name] = make_multiplier("pid", kp=c.kp, ki=c.step_size, kd=c.kd, **common)
+        else:
+            multipliers[name] = make_multiplier("dual", step_size=c.step_size, **common)
+    return multipliers
+
+
+def build_run(config: TrainConfig) -> tuple[BatchedLaneKeepingEnv, Learner,
+                                            dict[str, Multiplier], torch.Generator]:
+    """Seeds torch and builds the environment, the learner, the multipliers and the generator
+    of minibatch orders, in this order (a resumed run rebuilds them the same way)."""
+    torch.set_num_threads(config.threads)
+    torch.manual_seed(config.seed)
+    generator = torch.Generator().manual_seed(config.seed)
+    env = build_env(config, num_envs=config.num_envs, seed=config.seed, training=True)
+    return env, build_learner(config, env), build_multipliers(config), generator

@@ -1,0 +1,71 @@
+"""Checkpoints of training runs, written atomically and stamped with a format version."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import torch
+from omegaconf import OmegaConf
+from tensordict import TensorDictBase
+
+from crllk.envs.batched import BatchedLaneKeepingEnv
+from crllk.envs.episodes import EpisodeAccumulator
+from crllk.files import atomic_write
+from crllk.rl.lagrange import Multiplier
+from crllk.tasks.constraints import COSTS
+from crllk.training.build import Learner
+from crllk.training.config import TrainConfig
+
+CHECKPOINT_FORMAT = 1
+"""Version of the checkpoint layout written by :mod:`crllk.training.loop`."""
+
+
+def save_checkpoint(path: str | Path, state: dict[str, Any]) -> Path:
+    """Saves ``state`` with ``torch.save`` atomically, stamped with the format version."""
+    return atomic_write(path, lambda handle: torch.save(
+        {"format": CHECKPOINT_FORMAT, **state}, handle))
+
+
+def load_checkpoint(path: str | Path) -> dict[str, Any]:
+    """Loads a checkpoint written by :func:`save_checkpoint`."""
+    path = Path(path)
+    state = torch.load(path, map_location="cpu", weights_only=False)
+    if not isinstance(state, dict) or state.get("format") != CHECKPOINT_FORMAT:
+        raise ValueError(f"{path}: not a crllk checkpoint of format {CHECKPOINT_FORMAT}")
+    return state
+
+
+def checkpoint_state(config: TrainConfig, learner: Learner, multipliers: dict[str, Multiplier],
+                     episodes: EpisodeAccumulator, env: BatchedLaneKeepingEnv,
+                     generator: torch.Generator, carry: TensorDictBase, *, iteration: int,
+                     frames: int, elapsed: float) -> dict[str, Any]:
+    return {
+        "iteration": iteration, "frames": frames, "elapsed": elapsed,
+        "config": OmegaConf.to_container(OmegaConf.structured(config)),
+        "actor": learner.actor.state_dict(),
+        "critics": {name: critic.state_dict() for name, critic in learner.critics.items()},
+        "optimizer": learner.optimizer.state_dict(),
+        "multipliers": {name: m.state_dict() for name, m in multipliers.items()},
+        "episodes": episodes.state_dict(),
+        "env": env.sim_state(),
+        "carry": carry.clone(),
+        "torch_rng": torch.get_rng_state(),
+        "generator": generator.get_state(),
+    }
+
+
+def restore(state: dict[str, Any], learner: Learner, multipliers: dict[str, Multiplier],
+            episodes: EpisodeAccumulator, env: BatchedLaneKeepingEnv,
+            generator: torch.Generator) -> None:
+    learner.actor.load_state_dict(state["actor"])
+    for name, critic in learner.critics.items():
+        critic.load_state_dict(state["critics"][name])
+    learner.optimizer.load_state_dict(state["optimizer"])
+    for name, multiplier in multipliers.items():
+        multiplier.load_state_dict(state["multipliers"][name])
+    learner.loss.set_multipliers([multipliers[c].value for c in COSTS])
+    episodes.load_state_dict(state["episodes"])
+    env.load_sim_state(state["env"])
+    torch.set_rng_state(state["torch_rng"])
+    generator.set_state(state["generator"])

@@ -1,0 +1,111 @@
+"""The run's CSV logs (``metrics.csv``, ``eval.csv``), their columns, and the console lines."""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import torch
+from tensordict import TensorDictBase
+
+import crllk  # noqa: F401  (chooses the headless GL backend before torchrl imports mujoco)
+from crllk.files import atomic_write_text
+from crllk.training.config import TrainConfig
+
+DISCRETE_ACTION_NAMES = ("left", "right", "straight")
+
+
+LOSS_KEYS = ("loss_objective", "loss_critic", "loss_cost_critic", "loss_entropy",
+             "loss_imitation", "entropy",
+             "kl_approx", "clip_fraction", "explained_variance", "explained_variance_lane",
+             "explained_variance_collision")
+
+
+class CsvLog:
+    """A CSV file with a fixed header, one row appended (and flushed) at a time."""
+
+    def __init__(self, path: Path, columns: Sequence[str]):
+        self.path = path
+        self.columns = list(columns)
+
+    def append(self, row: dict[str, Any]) -> None:
+        new = not self.path.exists()
+        with self.path.open("a", newline="") as handle:
+            writer = csv.DictWriter(handle, fieldnames=self.columns)
+            if new:
+                writer.writeheader()
+            writer.writerow({k: _format(row.get(k, "")) for k in self.columns})
+
+    def truncate_after(self, iteration: int) -> None:
+        """Drops rows of iterations after ``iteration`` (written after the last checkpoint)."""
+        if not self.path.exists():
+            return
+        with self.path.open(newline="") as handle:
+            rows = [r for r in csv.DictReader(handle) if int(r["iteration"]) <= iteration]
+        buffer = io.StringIO()
+        writer = csv.DictWriter(buffer, fieldnames=self.columns, lineterminator="\r\n")
+        writer.writeheader()
+        writer.writerows(rows)
+        atomic_write_text(self.path, buffer.getvalue())
+
+
+def _format(value: Any) -> Any:
+    return f"{value:.6g}" if isinstance(value, float) else value
+
+
+def metric_columns(action: str) -> list[str]:
+    columns = ["iteration", "frames", "time_s", "frames_per_s", "episodes", "J_R", "J_clane",
+               "J_coll", "episode_length", "encounter_episodes", "J_coll_encounter",
+               "lambda_lane", "lambda_collision", *LOSS_KEYS]
+    if action == "discrete":
+        return columns + [f"action_{n}" for n in DISCRETE_ACTION_NAMES]
+    return [*columns, "action_velocity_mean", "action_steering_mean", "action_steering_std"]
+
+
+EVAL_COLUMNS = ["iteration", "frames", "time_s", "evaluation_s", "episodes", "J_R", "J_clane",
+                "J_coll", "episode_length", "satisfied"]
+"""``time_s``: wall time of the run when the evaluation began (earlier evaluations included);
+``evaluation_s``: how long this evaluation took."""
+
+
+def action_columns(batch: TensorDictBase, action: str) -> dict[str, float]:
+    """The iteration's action histogram (discrete) or action statistics (continuous)."""
+    actions = batch["action"]
+    if action == "discrete":
+        counts = torch.bincount(actions.reshape(-1), minlength=len(DISCRETE_ACTION_NAMES))
+        fractions = counts.to(torch.float64) / counts.sum()
+        return {f"action_{name}": float(f) for name, f in zip(DISCRETE_ACTION_NAMES, fractions,
+                                                              strict=True)}
+    flat = actions.reshape(-1, actions.shape[-1]).to(torch.float64)
+    return {"action_velocity_mean": float(flat[:, 0].mean()),
+            "action_steering_mean": float(flat[:, 1].mean()),
+            "action_steering_std": float(flat[:, 1].std())}
+
+
+def progress_text(row: dict[str, Any]) -> str:
+    def show(value: float, digits: int) -> str:
+        return "-" if math.isnan(value) else f"{value:.{digits}f}"
+
+    return (f"J_R {show(row['J_R'], 2)} m  J_clane {show(row['J_clane'], 2)} dm  "
+            f"J_coll {show(row['J_coll'], 2)}  λ {row['lambda_lane']:.2f}/"
+            f"{row['lambda_collision']:.2f}")
+
+
+def print_last_evaluation(path: Path, config: TrainConfig) -> None:
+    """One line on the latest evaluation in ``eval.csv``, if there is one."""
+    if not path.exists():
+        return
+    with path.open(newline="") as handle:
+        rows = list(csv.DictReader(handle))
+    if not rows:
+        return
+    last = rows[-1]
+    verdict = "both constraints hold" if last["satisfied"] == "1" else "constraints violated"
+    print(f"evaluation at {last['frames']} frames ({last['episodes']} episodes): "
+          f"J_R {float(last['J_R']):.2f} m, J_clane {float(last['J_clane']):.3f} dm "
+          f"(≤ {config.algo.lane.threshold}), J_coll {float(last['J_coll']):.3f} "
+          f"(≤ {config.algo.collision.threshold}): {verdict}", flush=True)

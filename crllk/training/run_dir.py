@@ -1,0 +1,31 @@
+"""A run's directory: one trainer at a time."""
+
+from __future__ import annotations
+
+import fcntl
+import io
+from pathlib import Path
+
+import crllk  # noqa: F401  (chooses the headless GL backend before torchrl imports mujoco)
+from crllk.errors import ConfigError
+
+SOURCE_RUN = "run"
+"""How errors about the run directory name their source."""
+
+
+def lock_run_dir(run_dir: Path) -> io.TextIOWrapper:
+    """Holds ``run_dir/.lock`` exclusively until the returned file is closed (or the process
+    ends, even by a kill), so two processes never train one run.
+
+    Raises:
+        ConfigError: if another process holds the lock.
+    """
+    run_dir.mkdir(parents=True, exist_ok=True)
+    handle = (run_dir / ".lock").open("w")
+    try:
+        fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        handle.close()
+        raise ConfigError(SOURCE_RUN, "run_dir", f"{run_dir} is being trained by another "
+                          "process; wait for it to finish or choose another run_dir") from None
+    return handle

@@ -1,0 +1,112 @@
+"""Reading a training run directory: its configuration, checkpoint, logs and evaluation.
+
+A run directory (``python -m crllk.train``) holds ``config.yaml``, ``metrics.csv`` (one row per
+iteration), ``eval.csv`` (one row per periodic evaluation), ``checkpoints/last.pt`` and, once
+``python -m crllk.evaluate`` has run, ``eval.json``.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from omegaconf import OmegaConf
+from omegaconf.errors import OmegaConfBaseException
+
+from crllk.errors import ConfigError
+from crllk.training.checkpoints import load_checkpoint
+from crllk.training.config import TrainConfig, validate
+
+CONFIG_FILE = "config.yaml"
+CHECKPOINT_FILE = Path("checkpoints") / "last.pt"
+EVAL_FILE = "eval.json"
+
+
+def load_run_config(run_dir: str | Path) -> TrainConfig:
+    """The validated training configuration saved in ``run_dir``.
+
+    Raises:
+        ConfigError: if ``run_dir`` is not a run directory or its config is unusable.
+    """
+    path = Path(run_dir) / CONFIG_FILE
+    if not path.is_file():
+        raise ConfigError(run_dir, "run", f"not a run directory (no {CONFIG_FILE})")
+    try:
+        stored = OmegaConf.load(path)
+    except (OmegaConfBaseException, OSError, ValueError) as err:
+        raise ConfigError(path, "<file>", f"unreadable: {err}") from None
+    stored["run_dir"] = str(run_dir)
+    return validate(stored)
+
+
+def load_run_checkpoint(run_dir: str | Path) -> dict[str, Any]:
+    """The run's last checkpoint (see ``crllk.training.checkpoints.checkpoint_state``).
+
+    Raises:
+        ConfigError: if the run has no checkpoint yet.
+    """
+    path = Path(run_dir) / CHECKPOINT_FILE
+    if not path.is_file():
+        raise ConfigError(run_dir, "run", f"no checkpoint yet ({CHECKPOINT_FILE})")
+    return load_checkpoint(path)
+
+
+def load_actor(run_dir: str | Path, env: Any) -> tuple[torch.nn.Module, dict[str, Any]]:
+    """The run's policy with its checkpoint weights, built for ``env``, and the checkpoint's
+    counters (``iteration``, ``frames``, ``elapsed``) and multipliers."""
+    from crllk.training.build import build_learner
+
+    config = load_run_config(run_dir)
+    state = load_run_checkpoint(run_dir)
+    actor = build_learner(config, env).actor
+    actor.load_state_dict(state["actor"])
+    actor.eval()
+    multipliers = {name: float(m["state"]["value"])
+                   for name, m in state["multipliers"].items()}
+    info = {"iteration": int(state["iteration"]), "frames": int(state["frames"]),
+            "elapsed_s": float(state["elapsed"]), "multipliers": multipliers}
+    return actor, info
+
+
+def read_csv(path: str | Path) -> dict[str, np.ndarray]:
+    """A CSV log as columns of floats (empty cells and ``nan`` become NaN); ``{}`` if the
+    file does not exist."""
+    path = Path(path)
+    if not path.is_file():
+        return {}
+    with path.open(newline="") as handle:
+        rows = list(csv.DictReader(handle))
+    if not rows:
+        return {}
+    return {key: np.array([_number(row[key]) for row in rows]) for key in rows[0]}
+
+
+def read_metrics(run_dir: str | Path) -> dict[str, np.ndarray]:
+    """``metrics.csv``: one entry per training iteration."""
+    return read_csv(Path(run_dir) / "metrics.csv")
+
+
+def read_evaluations(run_dir: str | Path) -> dict[str, np.ndarray]:
+    """``eval.csv``: one entry per periodic deterministic evaluation during training."""
+    return read_csv(Path(run_dir) / "eval.csv")
+
+
+def read_eval_json(run_dir: str | Path) -> dict[str, Any]:
+    """``eval.json`` as written by ``python -m crllk.evaluate``."""
+    return json.loads((Path(run_dir) / EVAL_FILE).read_text())
+
+
+def _number(text: str | None) -> float:
+    try:
+        return float(text) if text not in (None, "") else math.nan
+    except ValueError:
+        return math.nan
+
+
+__all__ = ["CHECKPOINT_FILE", "CONFIG_FILE", "EVAL_FILE", "load_actor", "load_run_checkpoint",
+           "load_run_config", "read_csv", "read_eval_json", "read_evaluations", "read_metrics"]

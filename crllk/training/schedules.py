@@ -1,0 +1,26 @@
+"""Settings that change over a run: the imitation weight and the learning rate."""
+
+from __future__ import annotations
+
+import crllk  # noqa: F401  (chooses the headless GL backend before torchrl imports mujoco)
+from crllk.training.config import TrainConfig
+
+
+def imitation_coeff(config: TrainConfig, frames: int) -> float:
+    """Weight of the imitation term after ``frames``: ``teacher.coeff`` at first, linearly
+    to ``teacher.final`` at ``teacher.frames``, then ``teacher.final``."""
+    teacher = config.teacher
+    if teacher.frames == 0:
+        return teacher.final
+    fraction = min(frames / teacher.frames, 1.0)
+    return teacher.coeff + fraction * (teacher.final - teacher.coeff)
+
+
+def learning_rate(config: TrainConfig, frames: int) -> float:
+    """Adam's learning rate after ``frames``: ``ppo.lr``, or with ``ppo.anneal_lr`` falling
+    linearly from it to ``ppo.lr × ppo.lr_final_fraction`` at ``total_frames``."""
+    ppo = config.ppo
+    if not ppo.anneal_lr:
+        return ppo.lr
+    fraction = min(frames / config.total_frames, 1.0)
+    return ppo.lr * (1.0 - fraction * (1.0 - ppo.lr_final_fraction))

@@ -1,0 +1,65 @@
+"""One iteration's learning: shaping the signals, the multipliers' dual ascent, PPO epochs."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import torch
+from tensordict import TensorDictBase
+
+import crllk  # noqa: F401  (chooses the headless GL backend before torchrl imports mujoco)
+from crllk.envs.episodes import EpisodeStats
+from crllk.rl.lagrange import Multiplier
+from crllk.training.build import Learner
+from crllk.training.config import TrainConfig
+from crllk.training.logs import LOSS_KEYS
+
+
+def shape_signals(batch: TensorDictBase, config: TrainConfig, off_road_lane_cost: float) -> None:
+    """The signals the learner sees, in place: the reward scaled by ``reward_scale``, and, with
+    ``absorbing_off_road``, the lane cost of every later step of a terminated episode folded
+    into its last step: the robot stays off the road at ``off_road_lane_cost`` (dm) per step
+    for ever, γ·c_off / (1 − γ) in discounted sum. Otherwise ending an episode early would cut
+    its lane cost short and a large λ_lane would make leaving the road look cheap."""
+    nxt = batch["next"]
+    nxt["reward"] = nxt["reward"] * config.reward_scale
+    if config.absorbing_off_road:
+        gamma = config.ppo.gamma
+        tail = off_road_lane_cost * gamma / (1.0 - gamma) if gamma < 1.0 else 0.0
+        nxt["cost_lane"] = nxt["cost_lane"] + tail * nxt["terminated"].to(torch.float32)
+
+
+def ppo_update(learner: Learner, batch: TensorDictBase, config: TrainConfig,
+               generator: torch.Generator) -> dict[str, float]:
+    """GAE for every signal, then ``epochs`` passes of minibatch PPO; mean diagnostics."""
+    learner.advantages(batch)
+    flat = batch.reshape(-1)
+    size, sums, count = flat.shape[0], dict.fromkeys(LOSS_KEYS, 0.0), 0
+    # clip each network's gradient on its own, so large value errors do not shrink the policy's
+    networks = {id(n): n for n in (learner.actor, *learner.critics.values())}  # step
+    groups = [list(network.parameters()) for network in networks.values()]
+    for _ in range(config.ppo.epochs):
+        order = torch.randperm(size, generator=generator)
+        for start in range(0, size, config.ppo.minibatch_size):
+            out = learner.loss(flat[order[start:start + config.ppo.minibatch_size]])
+            total = out["loss_objective"] + out["loss_critic"] + out["loss_cost_critic"] + \
+                out["loss_entropy"] + out["loss_imitation"]
+            learner.optimizer.zero_grad(set_to_none=True)
+            total.backward()
+            for group in groups:
+                torch.nn.utils.clip_grad_norm_(group, config.ppo.max_grad_norm)
+            learner.optimizer.step()
+            for key in LOSS_KEYS:
+                sums[key] += out[key].item()
+            count += 1
+    return {key: value / count for key, value in sums.items()}
+
+
+def update_multipliers(multipliers: dict[str, Multiplier],
+                       episodes: Sequence[EpisodeStats]) -> None:
+    """Dual ascent from the finished episodes of the task's own spawn distribution (episodes
+    started in front of an obstacle are left out): Ĵ_clane is an episode's mean lane cost
+    (dm), Ĵ_coll its number of collisions."""
+    episodes = [e for e in episodes if not e.encounter]
+    multipliers["lane"].update([e.lane_cost for e in episodes])
+    multipliers["collision"].update([e.collisions for e in episodes])
