@@ -32,7 +32,7 @@ from typing import Any
 
 import torch
 
-from crllk.evaluation.report import DEFAULT_SEED, aggregate
+from crllk.evaluation.report import DEFAULT_SEED, PAPER_CONSTRAINTS, aggregate
 from crllk.evaluation.runs import evaluate_follower
 from crllk.files import atomic_write_text
 from crllk.training.runs import CHECKPOINT_FILE, EVAL_FILE, read_eval_json
@@ -88,8 +88,8 @@ class RunSpec:
     def train_command(self, root: Path, settings: Settings) -> list[str]:
         return [sys.executable, "-m", "crllk.train", f"task={self.task}", *AGENTS[self.agent],
                 f"obs={settings.obs}", f"seed={self.seed}",
-                f"algo.lane.threshold={self.lane_threshold}",
-                f"algo.collision.threshold={THRESHOLDS['collision']}",
+                f"algo.constraints.lane.threshold={self.lane_threshold}",
+                f"algo.constraints.collision.threshold={THRESHOLDS['collision']}",
                 f"total_frames={settings.frames}", f"run_dir={self.directory(root)}",
                 "resume=true", "progress=false", "threads=1", *settings.train_overrides,
                 *self.extra]
@@ -220,41 +220,56 @@ def _cell(entry: dict[str, float], digits: int) -> str:
     return f"{entry['mean']:.{digits}f} ± {entry['std']:.{digits}f}"
 
 
+def _constraints(results: dict[str, dict[str, Any]]) -> list[dict[str, Any]]:
+    """The constraints of the agents' evaluations (the paper's two for older documents)."""
+    first = next(iter(results.values()), {})
+    return list(first.get("constraints") or PAPER_CONSTRAINTS)
+
+
+def _all_of(constraints: Sequence[Any]) -> str:
+    return "both constraints" if len(constraints) == 2 else "every constraint"
+
+
 def verdicts(results: dict[str, dict[str, Any]], constrained: Sequence[str],
              thresholds: dict[str, float]) -> list[str]:
     """One sentence per constrained agent: satisfied, or by how much each constraint misses."""
+    constraints = _constraints(results)
+    everything = _all_of(constraints)
     lines = []
     for agent in constrained:
         if agent not in results:
             continue
-        lane, coll = results[agent]["J_clane"]["mean"], results[agent]["J_coll"]["mean"]
         misses = []
-        if lane > thresholds["lane"]:
-            misses.append(f"J_clane by {lane - thresholds['lane']:.3f} dm")
-        if coll > thresholds["collision"]:
-            misses.append(f"J_coll by {coll - thresholds['collision']:.3f}")
+        for c in constraints:
+            value, bound = results[agent][c["metric"]]["mean"], thresholds[c["name"]]
+            if value > bound:
+                unit = f" {c['unit']}" if c["unit"] == "dm" else ""
+                misses.append(f"{c['metric']} by {value - bound:.3f}{unit}")
         per_seed = ", ".join("yes" if s else "no" for s in results[agent]["satisfied"])
+        held = "both hold per seed" if len(constraints) == 2 else "all hold per seed"
         if misses:
             lines.append(f"- {agent} misses on average: {'; '.join(misses)} "
-                         f"(both hold per seed: {per_seed}).")
+                         f"({held}: {per_seed}).")
         else:
-            lines.append(f"- {agent} satisfies both constraints on average "
-                         f"(both hold per seed: {per_seed}).")
+            lines.append(f"- {agent} satisfies {everything} on average "
+                         f"({held}: {per_seed}).")
     return lines
 
 
 def comparisons(results: dict[str, dict[str, Any]], pairs: Sequence[tuple[str, str]],
                 ) -> list[str]:
     """Constrained agent against its fixed-weight baseline, as measured."""
+    constraints = _constraints(results)
     lines = []
     for ours, baseline in pairs:
         if ours not in results or baseline not in results:
             continue
         a, b = results[ours], results[baseline]
-        lines.append(
-            f"- {ours} vs {baseline}: J_R {a['J_R']['mean']:.2f} vs {b['J_R']['mean']:.2f} m, "
-            f"J_clane {a['J_clane']['mean']:.3f} vs {b['J_clane']['mean']:.3f} dm, "
-            f"J_coll {a['J_coll']['mean']:.3f} vs {b['J_coll']['mean']:.3f}.")
+        metrics = ", ".join(
+            f"{c['metric']} {a[c['metric']]['mean']:.3f} vs {b[c['metric']]['mean']:.3f}"
+            + (f" {c['unit']}" if c["unit"] == "dm" else "") for c in constraints)
+        lines.append(f"- {ours} vs {baseline}: J_R {a['J_R']['mean']:.2f} vs "
+                     f"{b['J_R']['mean']:.2f} m, {metrics}.")
     return lines
 
 
@@ -279,8 +294,8 @@ def table_markdown(document: dict[str, Any]) -> str:
     rule = "| --- " * (len(agents) + 2) + "|"
     rows = []
     for metric, label, digits in (
-            ("J_clane", f"J_clane (dm, ≤ {thresholds['lane']})", 3),
-            ("J_coll", f"J_coll (per episode, ≤ {thresholds['collision']})", 3),
+            *((c["metric"], f"{c['metric']} ({c['unit']}, ≤ {thresholds[c['name']]})", 3)
+              for c in _constraints(results)),
             ("J_R", "J_R (m per episode)", 2),
             ("episode_length", "episode length (steps)", 0)):
         cells = [_cell(results[a][metric], digits) for a in agents]
@@ -402,9 +417,10 @@ def sweep_specs(settings: Settings) -> list[RunSpec]:
             for lane in settings.lane_weights:
                 for collision in settings.collision_weights:
                     specs.append(RunSpec("PPO-D", task, seed, tag=f"-w{lane:g}-{collision:g}",
-                                         extra=(f"algo.lane.initial={lane}",
-                                                f"algo.collision.initial={collision}",
-                                                f"algo.collision.max_value={max(collision, 100)}")))
+                                         extra=(f"algo.constraints.lane.initial={lane}",
+                                                f"algo.constraints.collision.initial={collision}",
+                                                "algo.constraints.collision.max_value="
+                                                f"{max(collision, 100)}")))
     return specs
 
 
@@ -439,9 +455,9 @@ def sweep_document(outcome: Outcome, settings: Settings) -> dict[str, Any]:
             lane = collision = None
             for item in specs[0].extra:
                 key, value = item.split("=")
-                if key == "algo.lane.initial":
+                if key == "algo.constraints.lane.initial":
                     lane = float(value)
-                elif key == "algo.collision.initial":
+                elif key == "algo.constraints.collision.initial":
                     collision = float(value)
             entries.append({"agent": specs[0].agent, "lane_weight": lane,
                             "collision_weight": collision,

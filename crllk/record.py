@@ -49,8 +49,8 @@ def _print_report(report: RecordingReport, wall: float) -> None:
     for message in report.warnings:
         print(f"warning: {message}", file=sys.stderr, flush=True)
     for stats in report.episode_stats:
-        print(f"episode: {stats.length} steps, {stats.distance:.2f} m, lane cost "
-              f"{stats.lane_cost:.3f} dm, collisions {stats.collisions:g}")
+        costs = ", ".join(f"{name} {value:.3g}" for name, value in stats.costs.items())
+        print(f"episode: {stats.length} steps, {stats.distance:.2f} m, {costs}")
     per_step = 1e3 / max(report.steps, 1)
     print(f"{report.steps} steps -> {report.path}: {wall:.2f} s wall, "
           f"{report.logging_seconds:.2f} s in rerun ({report.logging_seconds * per_step:.3f} "

@@ -1,20 +1,8 @@
 """``python -m crllk.train task=<name>``: Lagrangian PPO (CRLLK) or fixed-weight PPO on a task.
 
-One iteration of the main loop (:func:`train`):
-
-1. collect ``rollout_steps`` control steps in each of ``num_envs`` simulations;
-2. update the multipliers λ from the episodes that finished (dual ascent, DESIGN.md §5);
-3. compute GAE advantages for the reward and each cost, and run PPO epochs on the combined
-   advantage (A_r − Σλ_i A_ci) / (1 + Σλ_i);
-4. append a row to ``metrics.csv``; every ``checkpoint_every`` iterations (and at the end)
-   write ``checkpoints/last.pt`` atomically; every ``eval.every`` iterations append a
-   evaluation to ``eval.csv`` (the same episodes as ``python -m crllk.evaluate``); every
-   ``record_every`` iterations record one evaluation episode with rerun; with ``live`` send
-   the row and the recordings to the run's live view (:mod:`crllk.recording.live`).
-
-The checkpoint holds the networks, the optimiser, the multipliers, the counters, the random
-generators, the simulations' full state and the running episode sums, so ``resume=true``
-continues exactly where the uninterrupted run would have been.
+Hydra composes the configuration (``crllk/conf``; every ``tasks/<name>.yaml`` is a choice of
+the ``task`` group), :func:`resolve_config` checks it (a resumed run keeps its saved settings)
+and :func:`crllk.training.loop.train` trains; bad input ends with one line and exit status 2.
 """
 
 from __future__ import annotations
@@ -30,7 +18,7 @@ import crllk  # noqa: F401  (chooses the headless GL backend before torchrl impo
 from crllk.errors import ConfigError
 from crllk.files import read_yaml
 from crllk.paths import task_file, task_names
-from crllk.training.config import TrainConfig, validate
+from crllk.training.config import TrainConfig, upgrade, validate
 from crllk.training.loop import train
 
 RESUME_KEEPS = ("total_frames", "progress", "threads", "checkpoint_every", "record_every",
@@ -53,7 +41,7 @@ def resolve_config(cfg: DictConfig) -> TrainConfig:
     config = validate(cfg)
     saved = config.resolved_run_dir() / "config.yaml"
     if config.resume and saved.exists():
-        stored = OmegaConf.load(saved)
+        stored = upgrade(OmegaConf.load(saved))
         for key in RESUME_KEEPS:
             stored[key] = getattr(config, key)
         stored["resume"] = True

@@ -13,12 +13,14 @@ from torchrl.envs import RewardSum, TransformedEnv
 from torchrl.envs.utils import check_env_specs
 
 import crllk
-from crllk.envs.batched import COST_KEYS, BatchedLaneKeepingEnv, make_env, sub_env_seeds
+from crllk.envs.batched import BatchedLaneKeepingEnv, make_env, sub_env_seeds
 from crllk.sim.physics import box_average
 
 TASK = "small_loop"
 NUM_ENVS = 2
 SHORT = {"horizon": 20}
+COST_KEYS = ("cost_lane", "cost_collision")
+"""The default task's cost entries."""
 REWARD_KEYS = ("reward", *COST_KEYS)
 
 

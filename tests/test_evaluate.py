@@ -67,8 +67,8 @@ def test_eval_json_matches_a_hand_rollout_of_the_same_seeds(tiny_run):
     expected = hand_rollout(tiny_run, EPISODES, NUM_ENVS, SEED)
     for row, hand in zip(rows, expected, strict=True):
         assert row["distance"] == pytest.approx(hand["distance"], abs=1e-5)
-        assert row["lane_cost"] == pytest.approx(hand["lane_cost"], abs=1e-5)
-        assert row["collisions"] == hand["collisions"]
+        assert row["cost_lane"] == pytest.approx(hand["lane_cost"], abs=1e-5)
+        assert row["cost_collision"] == hand["collisions"]
         assert row["length"] == hand["length"]
         assert sum(row["actions"].values()) == row["length"]
         assert row["termination"] in ("off_road", "collision", "unstable", "time_limit")

@@ -14,13 +14,17 @@ from tiny_runs import compose_config, run_in_process
 import crllk
 from crllk.errors import ConfigError
 from crllk.recording import live
-from crllk.recording.live import PREFIX, SERIES, THRESHOLD, LiveView
+from crllk.recording.live import PREFIX, THRESHOLD, LiveView
+from crllk.recording.live import series as live_series
 from crllk.recording.recorder import read_recording, record_episodes
 from crllk.recording.viewer import free_port
+from crllk.tasks.constraints import BUILTIN
 from crllk.tasks.follower import FollowerPolicy
 from crllk.training.config import validate
 
-THRESHOLDS = {"J_clane": 0.5, "J_coll": 0.02}
+CONSTRAINTS = (BUILTIN["lane"], BUILTIN["collision"])
+THRESHOLDS = {"lane": 0.5, "collision": 0.02}
+SERIES = live_series(CONSTRAINTS)
 
 
 def series(chunks, path: str) -> dict[int, float]:
@@ -40,7 +44,7 @@ def test_iterations_and_recordings_land_on_the_iteration_timeline(tmp_path):
     recording = tmp_path / "iteration_000002.rrd"
     record_episodes(env, FollowerPolicy(env), 1, recording, iteration=2)
     env.close()
-    view = LiveView([rr.FileSink(tmp_path / "live.rrd")], "live-test", THRESHOLDS)
+    view = LiveView([rr.FileSink(tmp_path / "live.rrd")], "live-test", CONSTRAINTS, THRESHOLDS)
     view.log_iteration(row(1, J_R=math.nan))  # no episode ended: no J_R
     view.log_iteration(row(2))
     view.add_recording(recording)
@@ -58,7 +62,7 @@ def test_iterations_and_recordings_land_on_the_iteration_timeline(tmp_path):
 
 
 def test_a_missing_recording_is_a_warning(tmp_path, capsys):
-    view = LiveView([rr.FileSink(tmp_path / "live.rrd")], "live-test", THRESHOLDS)
+    view = LiveView([rr.FileSink(tmp_path / "live.rrd")], "live-test", CONSTRAINTS, THRESHOLDS)
     view.add_recording(tmp_path / "gone.rrd")
     view.close()
     assert "warning: live view:" in capsys.readouterr().err

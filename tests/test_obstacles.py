@@ -151,7 +151,7 @@ def test_encounter_spawns_start_before_a_blocking_obstacle():
     for _ in range(50):
         env.reset()
         assert env.task.encounter
-        pose = env.task.outcome.lane_pose
+        pose = env.task.lane_pose
         ahead = env.task.obstacles.ahead(pose, 7, 1.5)
         assert any(0.25 < o.distance < 1.2 + 0.05 and o.lateral_left < 0.1
                    and o.lateral_right > -0.1 for o in ahead), (pose, ahead)

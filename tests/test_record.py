@@ -27,13 +27,16 @@ from crllk.errors import RecordingError
 from crllk.maps import markings
 from crllk.recording import blueprint as layout
 from crllk.recording import recorder
-from crllk.recording.entities import ACTION_ENTITY_PATHS, ENTITY_PATHS
+from crllk.recording.entities import ACTION_ENTITY_PATHS, entity_paths
 from crllk.recording.recorder import read_recording, record_episodes
 from crllk.rl.models import ModelConfig, make_actor
 from crllk.rl.rollout import run_episodes
 from crllk.sim import constants as C
+from crllk.tasks.constraints import BUILTIN
 from crllk.tasks.follower import FollowerPolicy
 from crllk.tasks.lane_keeping import state_feature_names
+
+CONSTRAINTS = (BUILTIN["lane"], BUILTIN["collision"])
 
 HORIZON = 30
 EPISODES = 2
@@ -84,7 +87,7 @@ def _replay_costs(actor) -> dict[str, list[float]]:
 
 def test_recording_holds_every_entity_and_one_pose_per_step(recorded):
     report, chunks, _ = recorded
-    expected = {*ENTITY_PATHS, *ACTION_ENTITY_PATHS["discrete"], "lagrange/lane",
+    expected = {*entity_paths(CONSTRAINTS), *ACTION_ENTITY_PATHS["discrete"], "lagrange/lane",
                 "lagrange/collision"}
     assert expected <= set(chunks), expected - set(chunks)
     assert report.steps == EPISODES * HORIZON and report.episodes == EPISODES
@@ -138,13 +141,13 @@ def _views(container) -> list:
 
 
 def test_blueprint_gives_every_series_its_own_plot_and_a_chase_view():
-    blueprint = layout.make_blueprint("continuous", ["lane", "collision"])
+    blueprint = layout.make_blueprint("continuous", CONSTRAINTS, ["lane", "collision"])
     views = _views(blueprint.root_container)
     plots = [v.origin for v in views if v.class_identifier == "TimeSeries"]
     assert sorted(plots) == sorted(
         ["reward/progress", "cost/lane", "cost/collision", "lane_pose/lateral",
          "lane_pose/heading_error", "action/velocity", "action/steering", "lagrange/lane",
-         "lagrange/collision", "episode/distance", "episode/lane_cost", "episode/collisions",
+         "lagrange/collision", "episode/distance", "episode/lane", "episode/collision",
          "episode/length"])
     chase = [v for v in views if v.class_identifier == "3D" and v.origin == "world/robot"]
     assert len(chase) == 1  # the eye rides in the robot's frame
@@ -152,13 +155,13 @@ def test_blueprint_gives_every_series_its_own_plot_and_a_chase_view():
 
 
 def test_episode_plot_ranges_keep_points_off_the_edges():
-    stats = [EpisodeStats(0, -0.5, 0.2, 1.0, 48, False),
-             EpisodeStats(0, 2.0, 0.0, 0.0, 150, True)]
+    stats = [EpisodeStats(0, -0.5, {"lane": 0.2, "collision": 1.0}, 48, False),
+             EpisodeStats(0, 2.0, {"lane": 0.0, "collision": 0.0}, 150, True)]
     ranges = layout.episode_ranges(stats)
     assert ranges["episode/distance"] == pytest.approx((-0.6, 2.4))
     assert ranges["episode/length"] == pytest.approx((0.0, 180.0))
-    assert layout.episode_ranges([EpisodeStats(0, 0.0, 0.0, 0.0, 0, True)])[
-        "episode/collisions"] == (0.0, 1.0)
+    assert layout.episode_ranges([EpisodeStats(0, 0.0, {"collision": 0.0}, 0, True)])[
+        "episode/collision"] == (0.0, 1.0)
 
 
 def test_recording_logs_episode_boundaries_and_statistics(recorded):
@@ -168,8 +171,8 @@ def test_recording_logs_episode_boundaries_and_statistics(recorded):
     assert "ends (time limit) after 30 steps" in texts[1]
     lengths = scalars(chunks, "episode/length")
     assert lengths.values == [HORIZON] * EPISODES
-    assert scalars(chunks, "episode/lane_cost").values == pytest.approx(
-        [s.lane_cost for s in report.episode_stats])
+    assert scalars(chunks, "episode/lane").values == pytest.approx(
+        [s.costs["lane"] for s in report.episode_stats])
 
 
 def test_logged_costs_equal_an_unrecorded_replay(recorded):
@@ -183,8 +186,8 @@ def test_logged_costs_equal_an_unrecorded_replay(recorded):
     evaluation = run_episodes(env, actor, EPISODES * NUM_ENVS).episodes[::NUM_ENVS]
     env.close()
     for logged, expected in zip(report.episode_stats, evaluation, strict=True):
-        assert logged.lane_cost == pytest.approx(expected.lane_cost, rel=1e-12)
-        assert logged.collisions == expected.collisions
+        assert logged.costs["lane"] == pytest.approx(expected.costs["lane"], rel=1e-12)
+        assert logged.costs["collision"] == expected.costs["collision"]
         assert logged.distance == pytest.approx(expected.distance, rel=1e-12)
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import itertools
 import math
+import re
 
 import dm_env
 import numpy as np
@@ -12,7 +13,9 @@ import pytest
 from dm_env import specs
 
 import crllk
+from crllk.errors import ConfigError
 from crllk.paths import task_names
+from crllk.tasks.config import load_task_config
 from crllk.tasks.lane_keeping import ACTIONS, OBSERVATIONS, state_feature_names
 
 TASKS = task_names()
@@ -318,3 +321,55 @@ def test_non_finite_action_is_refused_with_a_clear_error(action):
     env.reset()
     with pytest.raises(ValueError, match="not finite"):
         env.step(np.array([np.nan, 0.0]))
+
+
+def test_constraints_are_declared_by_the_task():
+    """Names of built-in constraints or full declarations; each adds a cost entry."""
+    config = load_task_config("small_loop", {"constraints": [
+        "lane", {"name": "weave", "signal": "lane_crossing", "aggregate": "mean",
+                 "unit": "per step", "metric": "J_weave"}]})
+    assert [c.name for c in config.constraints] == ["lane", "weave"]
+    env = crllk.load("small_loop", observation="state", seed=0,
+                     overrides={"constraints": ["lane", "collision", "crossing"]})
+    assert {"cost_lane", "cost_collision", "cost_crossing"} <= set(env.reset().observation)
+
+
+@pytest.mark.parametrize(("constraints", "problem"), [
+    (["lane", "speed"], "constraints[1]: unknown constraint 'speed'"),
+    ([], "constraints: expected a non-empty list"),
+    (["lane", "lane"], "constraints[1]: 'lane' appears twice"),
+    ([{"name": "x", "signal": "speed", "aggregate": "sum", "unit": "", "metric": "J"}],
+     "constraints[0]: every key needs a non-empty string"),
+    ([{"name": "x", "signal": "speed", "aggregate": "sum", "unit": "u", "metric": "J"}],
+     "constraints[0].signal: unknown signal 'speed'"),
+    ([{"name": "x", "signal": "collision", "aggregate": "max", "unit": "u", "metric": "J"}],
+     "constraints[0].aggregate: must be one of mean, sum"),
+    ([{"name": "x", "signal": "collision"}], "constraints[0]: missing keys"),
+])
+def test_bad_constraints_name_the_entry(constraints, problem):
+    with pytest.raises(ConfigError, match=re.escape(problem)):
+        load_task_config("small_loop", {"constraints": constraints})
+
+
+@pytest.mark.parametrize(("before", "after", "crossed"), [
+    (0.0, -0.10, 0.0),   # towards the yellow centre line (0.117 m left), not across
+    (0.0, -0.13, 1.0),   # across it
+    (-0.13, -0.16, 0.0),  # further into the other lane
+    (-0.13, 0.0, 1.0),   # back across it
+    (0.0, 0.13, 0.0),    # towards the white edge line (0.1365 m right), not across
+    (0.10, 0.14, 1.0),   # across it
+])
+def test_lane_crossing_probes(before, after, crossed):
+    """The crossing cost is 1 on a step whose start and end lie on either side of a lane
+    line (lateral offsets in m from the lane centre, positive right)."""
+    env = crllk.load("small_loop", observation="state", action="duty", seed=0,
+                     overrides={"constraints": ["crossing"]})
+    env.reset()
+    task, physics = env.task, env.physics
+    lane = next(ln for ln in task.map.lanes if ln.turn == 0)
+    for lateral in (before, after):
+        x, y, heading = lane.point_at(lane.length / 2, lateral)
+        with physics.reset_context():
+            physics.set_pose(x, y, heading)
+        task.after_step(physics)
+    assert task.get_observation(physics)["cost_crossing"] == crossed

@@ -51,7 +51,7 @@ def test_teacher_passes_the_obstacles(action):
         return td.set("action", torch.as_tensor(actions, dtype=dtype))
 
     result = run_episodes(env, policy, 20)
-    assert result.summary.J_coll == 0.0
+    assert result.summary.J["J_coll"] == 0.0
     assert result.summary.J_R > 0.3
 
 

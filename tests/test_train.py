@@ -66,13 +66,41 @@ def test_tiny_run_of_every_variant(tmp_path, algo, action, obs):
 
 def test_multiplier_rises_while_the_constraint_is_violated(tmp_path):
     """An untrained policy leaves the road: λ_coll must grow from 0 by dual ascent."""
-    run = run_in_process(tmp_path / "run", 3, ["algo.collision.step_size=0.5", "num_envs=4",
-                                               "rollout_steps=96", "task.horizon=512"],
+    run = run_in_process(tmp_path / "run", 3, ["algo.constraints.collision.step_size=0.5",
+                                               "obs=state", "num_envs=4", "rollout_steps=96",
+                                               "task.horizon=512"],
                          frames_per_iteration=4 * 96)
     rows = read_rows(run / "metrics.csv")
     collisions = [float(r["J_coll"]) for r in rows if int(r["episodes"]) > 0]
     assert collisions and max(collisions) > 0.02
     assert float(rows[-1]["lambda_collision"]) > 0.0
+
+
+def test_a_third_constraint_is_configuration_alone(tmp_path):
+    """The lane-crossing cost of C-CRLLK, enabled by overrides: its cost reaches the episode
+    statistics, its multiplier rises while crossings exceed the threshold, and metrics.csv,
+    eval.csv and the checkpoint carry it."""
+    run = run_in_process(tmp_path / "run", 3, [
+        "obs=state", "num_envs=4", "rollout_steps=96", "task.horizon=512",
+        "task.constraints=[lane,collision,crossing]", "algo.constraints.crossing.threshold=0",
+        "eval.every=3", "eval.episodes=4", "eval.num_envs=2"], frames_per_iteration=4 * 96)
+    rows = read_rows(run / "metrics.csv")
+    assert {"J_ccross", "lambda_crossing", "explained_variance_crossing",
+            "J_ccross_encounter"} <= set(rows[0])
+    crossings = [float(r["J_ccross"]) for r in rows if int(r["episodes"]) > 0]
+    assert crossings and max(crossings) > 0.0
+    assert float(rows[-1]["lambda_crossing"]) > 0.0
+    assert "J_ccross" in read_rows(run / "eval.csv")[0]
+    state = load_checkpoint(run / "checkpoints" / "last.pt")
+    assert set(state["multipliers"]) == {"lane", "collision", "crossing"}
+    assert set(state["critics"]) == {"reward", "lane", "collision", "crossing"}
+
+
+def test_a_constraint_without_a_multiplier_fails_clearly(tmp_path):
+    """A constraint in the task but not in algo.constraints: one line naming the field."""
+    with pytest.raises(ConfigError, match=r"algo\.constraints\.crossing: the task constrains"):
+        run_in_process(tmp_path / "run", 1, ["obs=state", "~algo.constraints.crossing",
+                                             "task.constraints=[lane,collision,crossing]"])
 
 
 def _assert_same(a, b, path="state"):
@@ -157,7 +185,7 @@ def test_existing_run_is_not_overwritten(tmp_path):
 
 @pytest.mark.parametrize(("override", "expected"), [
     ("task=no_such_map", "no_such_map"),
-    ("algo.lane.threshold=-1", "algo.lane.threshold: must be >= 0"),
+    ("algo.constraints.lane.threshold=-1", "algo.constraints.lane.threshold: must be >= 0"),
     ("total_frames=many", "total_frames"),
     ("obs=camera", "camera"),
     ("ppo.gamma=1.5", "ppo.gamma: must lie in [0, 1]"),
@@ -180,9 +208,9 @@ def test_schema_rejects_wrong_types_in_process():
 def test_ppo_baseline_weights_follow_the_action_type():
     discrete = validate(compose_config(["algo=ppo"]))
     continuous = validate(compose_config(["algo=ppo", "action=continuous"]))
-    assert discrete.algo.frozen and discrete.algo.lane.initial == 1.0
-    assert discrete.algo.collision.initial == 4.0
-    assert continuous.algo.collision.initial == 40.0
+    assert discrete.algo.frozen and discrete.algo.constraints["lane"].initial == 1.0
+    assert discrete.algo.constraints["collision"].initial == 4.0
+    assert continuous.algo.constraints["collision"].initial == 40.0
 
 
 def test_broken_task_file_names_file_and_field(tmp_path):
@@ -202,7 +230,7 @@ def test_a_run_being_trained_cannot_be_trained_twice(tmp_path):
     run_dir = tmp_path / "run"
     holder = subprocess.Popen(
         [sys.executable, "-c", "import sys; from pathlib import Path; "
-         "from crllk.train import lock_run_dir; held = lock_run_dir(Path(sys.argv[1])); "
+         "from crllk.training.run_dir import lock_run_dir; held = lock_run_dir(Path(sys.argv[1])); "
          "print('locked', flush=True); sys.stdin.read()", str(run_dir)],
         cwd=REPO, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
     try:

@@ -20,6 +20,7 @@ import torch
 from matplotlib.ticker import FuncFormatter
 from torchrl.envs.utils import ExplorationType, set_exploration_type, step_mdp
 
+from crllk.evaluation.report import episode_cost
 from crllk.files import atomic_write
 from crllk.tasks.actions import DISCRETE_NAMES
 from crllk.training.build import build_env
@@ -136,8 +137,9 @@ def figure1_data(by_threshold: Mapping[float, Sequence[Path]],
         data["thresholds"][f"{threshold:g}"] = {
             "runs": [str(d) for d in run_dirs], "curves": curves,
             "test_episode": {"run_dir": str(run_dirs[0]), "actions": episode["actions"],
-                             "J_R": episode["distance"], "J_clane": episode["lane_cost"],
-                             "collisions": episode["collisions"]},
+                             "J_R": episode["distance"],
+                             "J_clane": episode_cost(episode, "lane"),
+                             "collisions": episode_cost(episode, "collision")},
             "evaluations": [read_eval_json(d)["summary"] for d in run_dirs],
             "final_lambda_lane": [float(read_metrics(d)["lambda_lane"][-1]) for d in run_dirs]}
     return data

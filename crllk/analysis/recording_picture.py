@@ -144,7 +144,7 @@ def draw_topdown(ax, chunks: dict[str, list[pa.RecordBatch]]) -> None:
     _draw_strips(ax, chunks[R.LANES], 0.5, alpha=0.5, linestyle=":")
     _draw_boxes(ax, chunks[R.OBJECTS], edge="black")
     trail = positions(chunks)
-    collisions = scalars(chunks, R.EPISODE_COLLISIONS)
+    collisions = scalars(chunks, R.episode_path("collision"))
     crashed = {int(e) for e, c in zip(collisions.episodes, collisions.values, strict=True) if c}
     points = np.asarray(trail.values)
     for k, episode in enumerate(np.unique(trail.episodes)):
@@ -166,8 +166,8 @@ def draw_series(ax, chunks: dict[str, list[pa.RecordBatch]]) -> None:
     """Lane cost, collision cost and lateral offset over simulated time, one segment per
     episode."""
     for path, label, colour, scale in (
-            (R.COST_LANE, "lane cost (dm)", "#e6194b", 1.0),
-            (R.COST_COLLISION, "collision cost", "#800000", 1.0),
+            (R.cost_path("lane"), "lane cost (dm)", "#e6194b", 1.0),
+            (R.cost_path("collision"), "collision cost", "#800000", 1.0),
             (R.LATERAL, "lateral offset (dm, + right)", "#0082c8", 10.0)):
         data = scalars(chunks, path)
         values = np.asarray(data.values) * scale

@@ -3,7 +3,7 @@
     python -m crllk.bench [--task small_loop] [--steps 3000] [--batched] [--training]
                           [--runs RUN_DIR ...]
 
-Bounds (DESIGN.md section 7): a state-observation environment step should cost at most twice
+Bounds: a state-observation environment step should cost at most twice
 the raw MuJoCo physics of one control step (ratio >= 0.5); a pixel environment step at most
 1/0.6 of the raw physics-plus-render of the same scene (ratio >= 0.6) and the pixel environment
 should reach 1,000 steps/s on 2 cores.

@@ -6,7 +6,7 @@
 Frames are environment steps of one sub-environment: a batched step of N sub-environments is
 N frames. The raw bounds (:func:`crllk.bench.rates.raw_physics_rate`, ``raw_render_rate``) are
 single-simulation control steps/s, so the ratio frames/s / bound is comparable to the budgets
-of DESIGN.md section 7 (state >= 0.5, pixels >= 0.6).
+of the targets (state >= 0.5, pixels >= 0.6).
 """
 
 from __future__ import annotations

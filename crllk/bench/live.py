@@ -24,15 +24,13 @@ from pathlib import Path
 
 import crllk  # noqa: F401  (headless GL before torchrl)
 from crllk.bench.training import bench_config
-from crllk.envs.episodes import EpisodeAccumulator, summarise
+from crllk.envs.episodes import EpisodeAccumulator
 from crllk.recording.live import LiveView, live_url, server_sink
 from crllk.recording.recorder import record_episodes
 from crllk.recording.viewer import free_port, start_viewer, stop_viewer
-from crllk.rl.rollout import collect
-from crllk.tasks.constraints import COSTS
 from crllk.training.build import Learner, build_env, build_run
 from crllk.training.config import TrainConfig
-from crllk.training.updates import ppo_update, shape_signals, update_multipliers
+from crllk.training.loop import episode_columns, learn
 
 _TARGET = 0.05
 """The live view may cost at most this share of training frames/s."""
@@ -63,26 +61,21 @@ def live_cost(config: TrainConfig, iterations: int, repetitions: int, viewer: bo
               ) -> LiveCost:
     """Alternating off/on blocks of ``iterations`` iterations, ``repetitions`` of each."""
     env, learner, multipliers, generator = build_run(config)
-    episodes = EpisodeAccumulator(config.num_envs)
+    episodes = EpisodeAccumulator(config.num_envs, env.constraints)
     carry = env.reset()
-    iteration = 0
+    iteration, frames_per_batch = 0, config.frames_per_batch
 
     def block(live: LiveView | None, recording: Path) -> tuple[float, float]:
         nonlocal carry, iteration
         start, cpu_start = time.perf_counter(), time.process_time()
         for _ in range(iterations):
             iteration += 1
-            batch, carry = collect(env, learner.actor, carry, config.rollout_steps)
-            finished = episodes.add_batch(batch)
-            update_multipliers(multipliers, finished)
-            learner.loss.set_multipliers([multipliers[c].value for c in COSTS])
-            shape_signals(batch, config, env.config.off_road_lane_cost)
-            losses = ppo_update(learner, batch, config, generator)
-            summary = summarise([e for e in finished if not e.encounter])
+            _, carry, finished, losses = learn(config, env, learner, multipliers, generator,
+                                               episodes, carry, iteration * frames_per_batch)
             if live is not None:
-                live.log_iteration({"iteration": iteration, "J_R": summary.J_R,
-                                    "J_clane": summary.J_clane, "J_coll": summary.J_coll,
-                                    **{f"lambda_{c}": multipliers[c].value for c in COSTS},
+                live.log_iteration({"iteration": iteration,
+                                    **episode_columns(finished, env.constraints),
+                                    **{f"lambda_{n}": m.value for n, m in multipliers.items()},
                                     **losses, "frames_per_s": 0.0})
         if live is not None:
             live.add_recording(recording)
@@ -93,7 +86,8 @@ def live_cost(config: TrainConfig, iterations: int, repetitions: int, viewer: bo
     with tempfile.TemporaryDirectory() as scratch:
         recording = _evaluation_recording(config, learner, Path(scratch) / "iteration.rrd")
         port = free_port()
-        live = LiveView([server_sink(port)], "crllk-bench-live", {"J_clane": 0.5})
+        live = LiveView([server_sink(port)], "crllk-bench-live", env.constraints,
+                        {c.name: 0.5 for c in env.constraints})
         process = start_viewer(free_port(), "--headless", "--connect", live_url(port)) \
             if viewer else None
         try:

@@ -2,7 +2,7 @@
 
 Training frames/s counts a whole iteration of :mod:`crllk.train` (collection with the policy,
 GAE for reward and costs, PPO epochs); the bound is the same batched environment stepped with
-random actions and no networks. DESIGN.md §7 asks for a ratio of at least 0.5 (state).
+random actions and no networks. The target is a ratio of at least 0.5 (state).
 """
 
 from __future__ import annotations
@@ -14,10 +14,10 @@ from dataclasses import dataclass
 from hydra import compose, initialize_config_module
 
 import crllk  # noqa: F401  (headless GL before torchrl)
-from crllk.rl.rollout import collect
+from crllk.envs.episodes import EpisodeAccumulator
 from crllk.training.build import build_run
 from crllk.training.config import TrainConfig, validate
-from crllk.training.updates import ppo_update, shape_signals
+from crllk.training.loop import learn
 
 
 @dataclass(frozen=True)
@@ -43,12 +43,10 @@ def training_rates(config: TrainConfig, iterations: int = 5) -> TrainingRates:
     env, learner, multipliers, generator = build_run(config)
     carry = env.reset()
 
+    episodes = EpisodeAccumulator(config.num_envs, env.constraints)
+
     def iterate(td):
-        batch, td = collect(env, learner.actor, td, config.rollout_steps)
-        learner.loss.set_multipliers([m.value for m in multipliers.values()])
-        shape_signals(batch, config, env.config.off_road_lane_cost)
-        ppo_update(learner, batch, config, generator)
-        return td
+        return learn(config, env, learner, multipliers, generator, episodes, td, 0)[1]
 
     carry = iterate(carry)  # warm-up
     start = time.perf_counter()

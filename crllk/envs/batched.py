@@ -10,7 +10,8 @@ the task hooks directly, skipping dm_control's ``Environment``. Keys after a ste
   add ``ToTensorImage`` for channels-first float) or ``"state"`` (float32 ``[N, F]``, entries
   named by :func:`crllk.tasks.lane_keeping.state_feature_names`);
 - reward-like (``[N, 1]`` float32, never in the observation): ``"reward"`` (forward progress
-  along the lane, m), ``"cost_lane"`` (dm) and ``"cost_collision"`` (0 or 1);
+  along the lane, m) and ``"cost_<name>"`` for each constraint the task declares
+  (:attr:`cost_keys`; by default ``"cost_lane"`` in dm and ``"cost_collision"``, 0 or 1);
 - ``"terminated"`` (the task ended the episode: off road, collision, unstable physics),
   ``"truncated"`` (the ``horizon`` time limit was reached without termination) and
   ``"done" = terminated | truncated``, each bool ``[N, 1]``.
@@ -56,8 +57,6 @@ from crllk.tasks.lane_keeping import (
 )
 from crllk.tasks.teacher import Teacher
 
-COST_KEYS = ("cost_lane", "cost_collision")
-"""Reward-like keys that carry the per-step costs next to ``"reward"``."""
 DONE_KEYS = ("done", "terminated", "truncated")
 
 
@@ -111,6 +110,10 @@ class BatchedLaneKeepingEnv(EnvBase):
         in the last steps, newest first (those still in flight through the motor delay), as
         the policy's own memory of what it asked for."""
         self._commands = np.zeros((num_envs, 2 * command_history_length(config)), np.float32)
+        self.constraints = config.constraints
+        """The task's constraints (:mod:`crllk.tasks.constraints`)."""
+        self.cost_keys = tuple(c.cost_key for c in config.constraints)
+        """Reward-like keys of the per-step costs, next to ``"reward"``, in constraint order."""
         self.reports_encounters = config.spawn.encounters > 0
         """Whether observations carry ``"encounter"``: the episode started in front of an
         obstacle (``spawn.encounters``), so that metrics can leave such episodes out."""
@@ -150,7 +153,7 @@ class BatchedLaneKeepingEnv(EnvBase):
         self.action_spec = self._action_spec_of(n)
         self.reward_spec = Composite(
             {key: Unbounded(shape=(*n, 1), dtype=torch.float32, device=self.device)
-             for key in ("reward", *COST_KEYS)}, shape=n, device=self.device)
+             for key in ("reward", *self.cost_keys)}, shape=n, device=self.device)
         self.done_spec = Composite(
             {key: Categorical(2, shape=(*n, 1), dtype=torch.bool, device=self.device)
              for key in DONE_KEYS}, shape=n, device=self.device)
@@ -229,13 +232,14 @@ class BatchedLaneKeepingEnv(EnvBase):
 
     def _step_outputs(self, outcomes: list[StepOutcome]) -> dict[str, torch.Tensor]:
         """The step's observation, reward-like and done entries, each ``[N, ...]``."""
-        rewards = np.array([[o.progress for o in outcomes], [o.cost_lane for o in outcomes],
-                            [o.cost_collision for o in outcomes]], dtype=np.float32)
-        reward, cost_lane, cost_collision = torch.from_numpy(rewards[:, :, None])
+        rewards = np.array([[o.progress for o in outcomes],
+                            *([o.cost(c) for o in outcomes] for c in self.constraints)],
+                           dtype=np.float32)
+        columns = torch.from_numpy(rewards[:, :, None])
         terminated = np.array([[o.termination is not None] for o in outcomes])
         truncated = (self.step_counts >= self._horizons())[:, None] & ~terminated
-        return {**self._observation_entries(), "reward": reward, "cost_lane": cost_lane,
-                "cost_collision": cost_collision,
+        return {**self._observation_entries(), "reward": columns[0],
+                **dict(zip(self.cost_keys, columns[1:], strict=True)),
                 "terminated": torch.from_numpy(terminated),
                 "truncated": torch.from_numpy(truncated),
                 "done": torch.from_numpy(terminated | truncated)}
@@ -346,4 +350,4 @@ def make_env(task: str | Path, *, num_envs: int = 1, observation: str = "pixels"
                                  teacher=teacher, commands=commands, device=device)
 
 
-__all__ = ["COST_KEYS", "BatchedLaneKeepingEnv", "make_env", "sub_env_seeds"]
+__all__ = ["BatchedLaneKeepingEnv", "make_env", "sub_env_seeds"]

@@ -1,20 +1,23 @@
-"""Per-episode statistics from batched transitions: distance, mean lane cost, collisions.
+"""Per-episode statistics from batched transitions: distance and one value per constraint.
 
-The paper's metrics over finished episodes (DESIGN.md §6): J_R is the forward distance of an
-episode (m), J_clane the mean per-step lane cost of an episode (dm) and J_coll its number of
-collisions (road departures count). :class:`EpisodeAccumulator` adds up each sub-environment's
+The paper's metrics over finished episodes: J_R is the forward distance of an episode (m); each
+constraint's metric (J_clane, J_coll, ...) is the mean over episodes of the constraint's episode
+value, the ``mean`` or ``sum`` of its per-step cost as the constraint declares
+(:mod:`crllk.tasks.constraints`). :class:`EpisodeAccumulator` adds up each sub-environment's
 running episode step by step and hands back an :class:`EpisodeStats` when it ends.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
-from dataclasses import asdict, dataclass
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 from tensordict import TensorDictBase
+
+from crllk.tasks.constraints import Constraint
 
 
 @dataclass(frozen=True)
@@ -22,72 +25,104 @@ class EpisodeStats:
     """One finished episode of one sub-environment."""
 
     env_index: int
-    distance: float  # m, sum of the forward progress rewards
-    lane_cost: float  # dm, mean per-step lane cost
-    collisions: float  # collisions and road departures in the episode
-    length: int  # control steps
-    truncated: bool  # ended by the time limit, not by the task
-    encounter: bool = False  # started in front of an obstacle (training spawns only)
+    distance: float
+    """Sum of the forward progress rewards (m)."""
+    costs: dict[str, float]
+    """Each constraint's episode value, by constraint name."""
+    length: int
+    """Control steps."""
+    truncated: bool
+    """Ended by the time limit, not by the task."""
+    encounter: bool = False
+    """Started in front of an obstacle (training spawns only)."""
 
     def as_row(self) -> dict[str, Any]:
-        return asdict(self)
+        """One flat row: ``cost_<name>`` per constraint."""
+        return {"env_index": self.env_index, "distance": self.distance,
+                **{f"cost_{name}": value for name, value in self.costs.items()},
+                "length": self.length, "truncated": self.truncated, "encounter": self.encounter}
 
 
 class EpisodeAccumulator:
     """Running sums of ``num_envs`` sub-environments' current episodes."""
 
-    def __init__(self, num_envs: int):
+    def __init__(self, num_envs: int, constraints: Sequence[Constraint]):
         self.num_envs = num_envs
+        self.constraints = tuple(constraints)
         self.distance = np.zeros(num_envs)
-        self.lane_cost = np.zeros(num_envs)
-        self.collisions = np.zeros(num_envs)
+        self.cost_sums = {c.name: np.zeros(num_envs) for c in self.constraints}
         self.length = np.zeros(num_envs, dtype=np.int64)
 
     def add_batch(self, batch: TensorDictBase) -> list[EpisodeStats]:
         """Adds transitions of shape ``[N, T]`` (time last) and returns the episodes that
         ended in them, in the order they ended."""
         nxt = batch["next"]
-        keys = ["reward", "cost_lane", "cost_collision", "done", "truncated"]
-        if "encounter" in nxt:
-            keys.append("encounter")
-        columns = [nxt[key].reshape(self.num_envs, -1).numpy() for key in keys]
+
+        def column(key: str) -> np.ndarray:
+            return nxt[key].reshape(self.num_envs, -1).numpy()
+
+        reward, done, truncated = column("reward"), column("done"), column("truncated")
+        costs = {c.name: column(c.cost_key) for c in self.constraints}
+        encounter = column("encounter") if "encounter" in nxt else None
         finished: list[EpisodeStats] = []
-        for t in range(columns[0].shape[1]):
-            finished += self.add_step(*(column[:, t] for column in columns))
+        for t in range(reward.shape[1]):
+            finished += self.add_step(
+                reward[:, t], {name: values[:, t] for name, values in costs.items()},
+                done[:, t], truncated[:, t], None if encounter is None else encounter[:, t])
         return finished
 
-    def add_step(self, reward: np.ndarray, cost_lane: np.ndarray, cost_collision: np.ndarray,
-                 done: np.ndarray, truncated: np.ndarray,
-                 encounter: np.ndarray | None = None) -> list[EpisodeStats]:
-        """Adds one step of every sub-environment (arrays of shape ``[N]``); ``encounter``
-        flags episodes that started in front of an obstacle."""
+    def add_transition(self, nxt: TensorDictBase) -> list[EpisodeStats]:
+        """Adds one step, the ``"next"`` entries of a ``[N]`` transition."""
+        def column(key: str) -> np.ndarray:
+            return nxt[key].reshape(self.num_envs).numpy()
+
+        return self.add_step(column("reward"),
+                             {c.name: column(c.cost_key) for c in self.constraints},
+                             column("done"), column("truncated"),
+                             column("encounter") if "encounter" in nxt else None)
+
+    def add_step(self, reward: np.ndarray, costs: Mapping[str, np.ndarray], done: np.ndarray,
+                 truncated: np.ndarray, encounter: np.ndarray | None = None
+                 ) -> list[EpisodeStats]:
+        """Adds one step of every sub-environment (arrays of shape ``[N]``, ``costs`` by
+        constraint name); ``encounter`` flags episodes that started in front of an obstacle."""
         self.distance += reward
-        self.lane_cost += cost_lane
-        self.collisions += cost_collision
+        for name, sums in self.cost_sums.items():
+            sums += costs[name]
         self.length += 1
         finished = []
         for i in np.flatnonzero(done):
+            length = int(self.length[i])
             finished.append(EpisodeStats(
                 env_index=int(i), distance=float(self.distance[i]),
-                lane_cost=float(self.lane_cost[i] / self.length[i]),
-                collisions=float(self.collisions[i]), length=int(self.length[i]),
-                truncated=bool(truncated[i]),
+                costs={c.name: float(c.episode_value(self.cost_sums[c.name][i], length))
+                       for c in self.constraints},
+                length=length, truncated=bool(truncated[i]),
                 encounter=False if encounter is None else bool(encounter[i])))
-            self.distance[i] = self.lane_cost[i] = self.collisions[i] = 0.0
+            self.distance[i] = 0.0
+            for sums in self.cost_sums.values():
+                sums[i] = 0.0
             self.length[i] = 0
         return finished
 
-    def state_dict(self) -> dict[str, np.ndarray]:
-        return {"distance": self.distance.copy(), "lane_cost": self.lane_cost.copy(),
-                "collisions": self.collisions.copy(), "length": self.length.copy()}
+    def state_dict(self) -> dict[str, Any]:
+        return {"distance": self.distance.copy(), "length": self.length.copy(),
+                "costs": {name: sums.copy() for name, sums in self.cost_sums.items()}}
 
-    def load_state_dict(self, state: dict[str, np.ndarray]) -> None:
-        for key in ("distance", "lane_cost", "collisions", "length"):
-            value = np.asarray(state[key])
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        arrays = {"distance": self.distance, "length": self.length,
+                  **{f"costs.{name}": sums for name, sums in self.cost_sums.items()}}
+        saved = {"distance": state["distance"], "length": state["length"],
+                 **{f"costs.{name}": value for name, value in state["costs"].items()}}
+        if set(saved) != set(arrays):
+            raise ValueError(f"episode accumulator state has {sorted(saved)}, expected "
+                             f"{sorted(arrays)}")
+        for key, target in arrays.items():
+            value = np.asarray(saved[key])
             if value.shape != (self.num_envs,):
                 raise ValueError(f"episode accumulator state {key!r} has shape {value.shape}, "
                                  f"expected ({self.num_envs},)")
-            getattr(self, key)[:] = value
+            target[:] = value
 
 
 @dataclass(frozen=True)
@@ -95,19 +130,22 @@ class Summary:
     """Mean metrics over episodes (NaN when there are none)."""
 
     episodes: int
-    J_R: float  # m
-    J_clane: float  # dm
-    J_coll: float  # collisions per episode
-    length: float  # control steps
+    J_R: float
+    """Mean distance (m)."""
+    length: float
+    """Mean episode length (control steps)."""
+    J: dict[str, float] = field(default_factory=dict)
+    """Each constraint's metric (mean episode value), by metric name (``J_clane``)."""
 
     def as_row(self) -> dict[str, Any]:
-        return asdict(self)
+        """``episodes``, ``J_R``, one column per constraint metric, ``length``."""
+        return {"episodes": self.episodes, "J_R": self.J_R, **self.J, "length": self.length}
 
 
-def summarise(episodes: Sequence[EpisodeStats]) -> Summary:
-    """The paper's J_R, J_clane and J_coll over ``episodes``."""
+def summarise(episodes: Sequence[EpisodeStats], constraints: Sequence[Constraint]) -> Summary:
+    """J_R and each constraint's metric over ``episodes``."""
     if not episodes:
-        return Summary(0, math.nan, math.nan, math.nan, math.nan)
+        return Summary(0, math.nan, math.nan, {c.metric: math.nan for c in constraints})
 
     def mean(values: list[float]) -> float:
         return math.fsum(values) / len(values)
@@ -115,9 +153,8 @@ def summarise(episodes: Sequence[EpisodeStats]) -> Summary:
     return Summary(
         episodes=len(episodes),
         J_R=mean([e.distance for e in episodes]),
-        J_clane=mean([e.lane_cost for e in episodes]),
-        J_coll=mean([e.collisions for e in episodes]),
         length=mean([float(e.length) for e in episodes]),
+        J={c.metric: mean([e.costs[c.name] for e in episodes]) for c in constraints},
     )
 
 

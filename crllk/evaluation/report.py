@@ -21,7 +21,29 @@ CONTINUOUS_BINS = np.linspace(-1.0, 1.0, 11)
 """Edges of the continuous action histogram (velocity and steering lie in [-1, 1])."""
 
 
-METRICS = ("J_R", "J_clane", "J_coll", "episode_length")
+PAPER_CONSTRAINTS = ({"name": "lane", "metric": "J_clane", "unit": "dm"},
+                     {"name": "collision", "metric": "J_coll", "unit": "per episode"})
+"""What an ``eval.json`` without a ``constraints`` entry (an older one) constrains."""
+
+
+def constraint_entries(document: dict[str, Any]) -> list[dict[str, Any]]:
+    """The constraints of an evaluation document: name, metric, unit, aggregate, threshold."""
+    return list(document.get("constraints") or PAPER_CONSTRAINTS)
+
+
+_OLDER_ROW_KEYS = {"lane": "lane_cost", "collision": "collisions"}
+"""Where an older ``eval.json`` row kept the paper's two costs."""
+
+
+def episode_cost(row: dict[str, Any], name: str) -> float:
+    """Constraint ``name``'s value in one episode row of an ``eval.json`` (``cost_<name>``)."""
+    key = f"cost_{name}"
+    return float(row[key] if key in row else row[_OLDER_ROW_KEYS[name]])
+
+
+def metrics(document: dict[str, Any]) -> list[str]:
+    """The metrics of a document's summary: J_R, each constraint's, the episode length."""
+    return ["J_R", *(c["metric"] for c in constraint_entries(document)), "episode_length"]
 
 
 def action_histogram(actions: Sequence[np.ndarray], action: str) -> dict[str, Any]:
@@ -66,7 +88,7 @@ def breakdown(result: EvaluationResult, objects: Sequence[Any] = ()) -> dict[str
         chosen = [e for e, d in zip(result.episodes, result.directions, strict=True)
                   if d == direction]
         if chosen:
-            by_direction[direction] = summarise(chosen).as_row()
+            by_direction[direction] = summarise(chosen, result.constraints).as_row()
     hits: dict[str, int] = {}
     for index in result.hit_objects:
         if index is not None:
@@ -83,11 +105,14 @@ def result_document(result: EvaluationResult, action: str, *, thresholds: dict[s
     breakdown of collisions)."""
     s = result.summary
     rows = episode_rows(result, action)
-    summary = {"J_R": s.J_R, "J_clane": s.J_clane, "J_coll": s.J_coll,
-               "episode_length": s.length,
-               "satisfied": bool(s.J_clane <= thresholds["lane"]
-                                 and s.J_coll <= thresholds["collision"])}
+    summary = {"J_R": s.J_R, **s.J, "episode_length": s.length,
+               "satisfied": all(s.J[c.metric] <= thresholds[c.name]
+                                for c in result.constraints)}
+    constraints = [{"name": c.name, "metric": c.metric, "unit": c.unit,
+                    "aggregate": c.aggregate, "threshold": thresholds[c.name]}
+                   for c in result.constraints]
     return {"source": source, "evaluation": settings, "thresholds": thresholds,
+            "constraints": constraints,
             "summary": summary, "action_histogram": action_histogram(result.actions, action),
             "terminations": dict(Counter(row["termination"] for row in rows)),
             "breakdown": breakdown(result, objects),
@@ -97,8 +122,9 @@ def result_document(result: EvaluationResult, action: str, *, thresholds: dict[s
 def aggregate(documents: Sequence[dict[str, Any]]) -> dict[str, Any]:
     """Mean and standard deviation (population, ddof 0) across runs of each metric, with
     the per-run values."""
-    out: dict[str, Any] = {"runs": [d["source"].get("run_dir") for d in documents]}
-    for metric in METRICS:
+    out: dict[str, Any] = {"runs": [d["source"].get("run_dir") for d in documents],
+                           "constraints": constraint_entries(documents[0])}
+    for metric in metrics(documents[0]):
         values = [float(d["summary"][metric]) for d in documents]
         out[metric] = {"mean": float(np.mean(values)), "std": float(np.std(values)),
                        "values": values}
@@ -109,14 +135,14 @@ def aggregate(documents: Sequence[dict[str, Any]]) -> dict[str, Any]:
 def format_summary(document: dict[str, Any]) -> str:
     s, src = document["summary"], document["source"]
     name = src.get("run_dir") or f"{src['algo']} on {src['task']}"
-    verdict = "both constraints hold" if s["satisfied"] else "constraints violated"
+    constraints = constraint_entries(document)
+    verdict = "every constraint holds" if s["satisfied"] else "constraints violated"
     text = (f"{name}: {document['evaluation']['episodes']} episodes: J_R {s['J_R']:.2f} m, "
-            f"J_clane {s['J_clane']:.3f} dm, J_coll {s['J_coll']:.3f}, "
-            f"length {s['episode_length']:.0f}: {verdict}")
+            f"{_metrics_text(s, constraints)}, length {s['episode_length']:.0f}: {verdict}")
     split = document.get("breakdown", {})
     for direction, row in split.get("by_direction", {}).items():
-        text += (f"\n  started {direction}: {row['episodes']} episodes, J_clane "
-                 f"{row['J_clane']:.3f} dm, J_coll {row['J_coll']:.3f}")
+        text += (f"\n  started {direction}: {row['episodes']} episodes, "
+                 f"{_metrics_text(row, constraints)}")
     if split.get("collisions_by_object"):
         text += "\n  ended on: " + ", ".join(f"{obstacle} ×{count}" for obstacle, count
                                             in split["collisions_by_object"].items())
@@ -127,5 +153,10 @@ def format_aggregate(result: dict[str, Any]) -> str:
     def show(metric: str, digits: int) -> str:
         return f"{result[metric]['mean']:.{digits}f} ± {result[metric]['std']:.{digits}f}"
 
-    return (f"{len(result['runs'])} runs: J_R {show('J_R', 2)} m, J_clane {show('J_clane', 3)} "
-            f"dm, J_coll {show('J_coll', 3)}")
+    metrics = ", ".join(f"{c['metric']} {show(c['metric'], 3)} {c['unit']}"
+                        for c in result["constraints"])
+    return f"{len(result['runs'])} runs: J_R {show('J_R', 2)} m, {metrics}"
+
+
+def _metrics_text(values: dict[str, Any], constraints: Sequence[dict[str, Any]]) -> str:
+    return ", ".join(f"{c['metric']} {values[c['metric']]:.3f} {c['unit']}" for c in constraints)

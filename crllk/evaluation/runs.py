@@ -33,8 +33,8 @@ def evaluate_run(run_dir: str | Path, *, episodes: int, deterministic: bool = Fa
               **info}
     settings = {"episodes": episodes, "seed": seed, "num_envs": num_envs,
                 "deterministic": deterministic}
-    thresholds = {"lane": config.algo.lane.threshold,
-                  "collision": config.algo.collision.threshold}
+    thresholds = {c.name: config.algo.constraints[c.name].threshold
+                  for c in env.config.constraints}
     document = result_document(result, config.action.name, thresholds=thresholds,
                                settings=settings, source=source,
                                objects=env.config.map.objects)

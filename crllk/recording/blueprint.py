@@ -4,7 +4,6 @@ signal, the episode table."""
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import TYPE_CHECKING
 
 import rerun.blueprint as rrb
 
@@ -13,12 +12,7 @@ from crllk.recording.entities import (
     ACTION_ENTITY_PATHS,
     CAMERA,
     CAMERA_VIEW,
-    COST_COLLISION,
-    COST_LANE,
-    EPISODE_COLLISIONS,
     EPISODE_DISTANCE,
-    EPISODE_ENTITY_PATHS,
-    EPISODE_LANE_COST,
     EPISODE_LENGTH,
     EVENTS,
     HEADING_ERROR,
@@ -26,33 +20,29 @@ from crllk.recording.entities import (
     LATERAL,
     REWARD,
     ROBOT,
+    cost_path,
+    episode_path,
+    episode_paths,
     series_name,
 )
-
-if TYPE_CHECKING:
-    pass
-
+from crllk.tasks.constraints import Constraint
 
 _EPISODE_HEADROOM = 1.2
 """The per-episode plots reach this many times the largest value."""
-
-
 _CHASE_EYE = (-0.9, 0.0, 0.6)
 """Eye of the chase view in the robot's frame (m): behind and above the robot."""
-
-
 _CHASE_TARGET = (0.4, 0.0, 0.0)
 """Point the chase view looks at, in the robot's frame (m): ahead on the road."""
 
 
-def _plots(paths: Sequence[str], ranges: dict[str, tuple[float, float]] | None = None
-           ) -> list[rrb.TimeSeriesView]:
+def _plots(paths: Sequence[str], constraints: Sequence[Constraint],
+           ranges: dict[str, tuple[float, float]] | None = None) -> list[rrb.TimeSeriesView]:
     """One plot per series, so that each gets an axis of its own scale (``ranges``: fixed y
     ranges by path); time axes linked, zooming one zooms all."""
     ranges = ranges or {}
     return [rrb.TimeSeriesView(
-        origin=path, name=series_name(path), plot_legend=rrb.PlotLegend(visible=False),
-        axis_x=rrb.TimeAxis(link="LinkToGlobal"),
+        origin=path, name=series_name(path, constraints),
+        plot_legend=rrb.PlotLegend(visible=False), axis_x=rrb.TimeAxis(link="LinkToGlobal"),
         axis_y=rrb.ScalarAxis(range=ranges[path]) if path in ranges else None)
         for path in paths]
 
@@ -61,9 +51,9 @@ def episode_ranges(stats: Sequence[EpisodeStats]) -> dict[str, tuple[float, floa
     """y ranges of the per-episode plots, from :data:`_EPISODE_HEADROOM` times the smallest
     value (or 0) to as much times the largest (or 1), so that no point sits on an edge."""
     values = {EPISODE_DISTANCE: [s.distance for s in stats],
-              EPISODE_LANE_COST: [s.lane_cost for s in stats],
-              EPISODE_COLLISIONS: [s.collisions for s in stats],
               EPISODE_LENGTH: [s.length for s in stats]}
+    for name in stats[0].costs if stats else ():
+        values[episode_path(name)] = [s.costs[name] for s in stats]
     ranges = {}
     for path, column in values.items():
         low, high = (_EPISODE_HEADROOM * f([*column, 0.0]) for f in (min, max))
@@ -84,7 +74,8 @@ def scene_views() -> rrb.Vertical:
         rrb.TextLogView(origin=EVENTS, name="events"), row_shares=[5, 4, 2])
 
 
-def make_blueprint(action_type: str = "discrete", multipliers: Sequence[str] = (),
+def make_blueprint(action_type: str, constraints: Sequence[Constraint],
+                   multipliers: Sequence[str] = (),
                    ranges: dict[str, tuple[float, float]] | None = None) -> rrb.Blueprint:
     """The review layout: the whole map, a chase view riding with the robot, the camera and
     the event log on the left; on the right one plot per step signal, one per episode
@@ -92,20 +83,22 @@ def make_blueprint(action_type: str = "discrete", multipliers: Sequence[str] = (
 
     Args:
         action_type: selects the action plots (:data:`ACTION_ENTITY_PATHS`).
+        constraints: the task's constraints, a cost plot and an episode plot each.
         multipliers: constraint names with a ``lagrange/<name>`` plot each.
         ranges: fixed y ranges of plots by path (:func:`episode_ranges`).
     """
-    step_paths = [REWARD, COST_LANE, COST_COLLISION, LATERAL, HEADING_ERROR,
+    step_paths = [REWARD, *(cost_path(c.name) for c in constraints), LATERAL, HEADING_ERROR,
                   *ACTION_ENTITY_PATHS[action_type],
                   *(LAGRANGE_PREFIX + name for name in multipliers)]
     table = rrb.DataframeView(origin="episode", name="episodes", query=rrb.archetypes.
                               DataframeQuery(timeline="episode", select=[
                                   "episode", *(rrb.components.ComponentColumnSelector(
                                       entity_path=path, component="Scalars:scalars")
-                                      for path in EPISODE_ENTITY_PATHS)]))
+                                      for path in episode_paths(constraints))]))
     right = rrb.Vertical(
-        rrb.Grid(*_plots(step_paths), grid_columns=2),
-        rrb.Grid(*_plots(EPISODE_ENTITY_PATHS, ranges), grid_columns=2), table,
+        rrb.Grid(*_plots(step_paths, constraints), grid_columns=2),
+        rrb.Grid(*_plots(episode_paths(constraints), constraints, ranges), grid_columns=2),
+        table,
         row_shares=[8, 4, 3])
     return rrb.Blueprint(
         rrb.Horizontal(scene_views(), right, column_shares=[1, 1]),

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import math
 import sys
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -29,6 +29,7 @@ from rerun.chunk import RrdReader
 
 from crllk.recording.blueprint import scene_views
 from crllk.recording.viewer import VIEWER_HOST, check_port_free, free_port, start_viewer
+from crllk.tasks.constraints import Constraint
 
 LIVE_MODES = ("none", "serve", "spawn")
 LIVE_PORT = 9877
@@ -36,14 +37,19 @@ LIVE_PORT = 9877
 APPLICATION_ID = "crllk-train"
 """Viewers keep one layout per application: the live view's apart from recordings'."""
 PREFIX = "train/"
-SERIES = {"J_R": "J_R (m)", "J_clane": "J_clane (dm)", "J_coll": "J_coll (collisions/episode)",
-          "lambda_lane": "λ_lane", "lambda_collision": "λ_collision",
-          "loss_objective": "policy loss", "loss_critic": "critic loss",
-          "loss_cost_critic": "cost critic loss", "loss_entropy": "entropy loss",
-          "loss_imitation": "imitation loss", "frames_per_s": "frames/s"}
-"""Columns of ``metrics.csv`` logged at ``train/<column>``, with their plot names."""
+LOSS_SERIES = {"loss_objective": "policy loss", "loss_critic": "critic loss",
+               "loss_cost_critic": "cost critic loss", "loss_entropy": "entropy loss",
+               "loss_imitation": "imitation loss", "frames_per_s": "frames/s"}
 THRESHOLD = "threshold"
-"""``train/J_clane/threshold`` and ``train/J_coll/threshold``: the constraint bounds."""
+"""``train/<metric>/threshold`` (``train/J_clane/threshold``, ...): the constraint bounds."""
+
+
+def series(constraints: Sequence[Constraint]) -> dict[str, str]:
+    """Columns of ``metrics.csv`` logged at ``train/<column>``, with their plot names: J_R,
+    each constraint's metric and multiplier, the losses, frames/s."""
+    return {"J_R": "J_R (m)",
+            **{c.metric: f"{c.metric} ({c.unit})" for c in constraints},
+            **{f"lambda_{c.name}": f"λ_{c.name}" for c in constraints}, **LOSS_SERIES}
 _SERVER_MEMORY = "512MiB"
 """The server keeps at most this much of the run for viewers that connect later."""
 _THRESHOLD_RGB = (160, 160, 160)
@@ -54,14 +60,14 @@ def live_url(port: int) -> str:
     return f"rerun+http://{VIEWER_HOST}:{port}/proxy"
 
 
-def live_blueprint() -> rrb.Blueprint:
+def live_blueprint(constraints: Sequence[Constraint]) -> rrb.Blueprint:
     """The map, a chase view and the camera of the latest evaluation episode with its events on
     the left (:func:`crllk.recording.blueprint.scene_views`); one plot per training series on the
     right; the ``iteration`` timeline, following the newest data."""
     plots = [rrb.TimeSeriesView(origin=PREFIX + column, name=name,
                                 plot_legend=rrb.PlotLegend(visible=False),
                                 axis_x=rrb.TimeAxis(link="LinkToGlobal"))
-             for column, name in SERIES.items()]
+             for column, name in series(constraints).items()]
     return rrb.Blueprint(
         rrb.Horizontal(scene_views(), rrb.Grid(*plots, grid_columns=3), column_shares=[2, 3]),
         rrb.BlueprintPanel(state="collapsed"), rrb.SelectionPanel(state="collapsed"),
@@ -74,28 +80,30 @@ class LiveView:
     Args:
         sinks: where the stream goes (:func:`open_live` gives the server; tests a file).
         recording_id: the run's recording id.
-        thresholds: constraint bounds by column (``{"J_clane": 0.5, "J_coll": 0.02}``).
+        constraints: the task's constraints.
+        thresholds: their bounds by constraint name (``{"lane": 0.5, "collision": 0.02}``).
     """
 
-    def __init__(self, sinks: list, recording_id: str, thresholds: Mapping[str, float],
-                 url: str | None = None) -> None:
+    def __init__(self, sinks: list, recording_id: str, constraints: Sequence[Constraint],
+                 thresholds: Mapping[str, float], url: str | None = None) -> None:
         self.url = url
-        self.thresholds = dict(thresholds)
+        self.series = series(constraints)
+        self.thresholds = {c.metric: thresholds[c.name] for c in constraints}
         self.rec = rr.RecordingStream(APPLICATION_ID, recording_id=recording_id)
         self.rec.set_sinks(*sinks)
-        self.rec.send_blueprint(live_blueprint(), make_active=True, make_default=True)
+        self.rec.send_blueprint(live_blueprint(constraints), make_active=True, make_default=True)
         self.rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
-        for column, name in SERIES.items():
+        for column, name in self.series.items():
             self.rec.log(PREFIX + column, rr.SeriesLines(names=name), static=True)
         for column in self.thresholds:
             self.rec.log(f"{PREFIX}{column}/{THRESHOLD}",
                          rr.SeriesLines(names=THRESHOLD, colors=_THRESHOLD_RGB), static=True)
 
     def log_iteration(self, row: Mapping[str, Any]) -> None:
-        """One row of ``metrics.csv`` (its ``iteration``, the :data:`SERIES` columns; a
+        """One row of ``metrics.csv`` (its ``iteration``, the :func:`series` columns; a
         column that is NaN, such as J_R of an iteration where no episode ended, is left out)."""
         self.rec.set_time("iteration", sequence=int(row["iteration"]))
-        for column in SERIES:
+        for column in self.series:
             value = row.get(column)
             if value is not None and math.isfinite(value):
                 self.rec.log(PREFIX + column, rr.Scalars(float(value)))
@@ -121,8 +129,8 @@ def server_sink(port: int) -> rr.GrpcServerSink:
     return rr.GrpcServerSink(VIEWER_HOST, port, server_memory_limit=_SERVER_MEMORY)
 
 
-def open_live(mode: str, port: int, recording_id: str, thresholds: Mapping[str, float]
-              ) -> tuple[LiveView | None, list[str]]:
+def open_live(mode: str, port: int, recording_id: str, constraints: Sequence[Constraint],
+              thresholds: Mapping[str, float]) -> tuple[LiveView | None, list[str]]:
     """The run's live view served on ``127.0.0.1:port`` (``mode`` ``"serve"``), with a native
     viewer connected to it (``"spawn"``), or None (``"none"``, or the port is taken); the
     problems are warnings for the caller to print."""
@@ -131,7 +139,7 @@ def open_live(mode: str, port: int, recording_id: str, thresholds: Mapping[str, 
     url = live_url(port)
     try:
         check_port_free(port)  # rerun's server would fail later, in its own thread
-        live = LiveView([server_sink(port)], recording_id, thresholds, url)
+        live = LiveView([server_sink(port)], recording_id, constraints, thresholds, url)
     except Exception as err:  # a live view never stops training
         return None, [f"live view unavailable ({VIEWER_HOST}:{port}: {err}); training goes on "
                       "without it"]
@@ -145,5 +153,5 @@ def open_live(mode: str, port: int, recording_id: str, thresholds: Mapping[str, 
     return live, problems
 
 
-__all__ = ["APPLICATION_ID", "LIVE_MODES", "LIVE_PORT", "PREFIX", "SERIES", "THRESHOLD",
-           "LiveView", "live_blueprint", "live_url", "open_live", "server_sink"]
+__all__ = ["APPLICATION_ID", "LIVE_MODES", "LIVE_PORT", "PREFIX", "THRESHOLD", "LiveView",
+           "live_blueprint", "live_url", "open_live", "series", "server_sink"]

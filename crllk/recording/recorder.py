@@ -14,8 +14,9 @@ since the recording began, ``step`` x control timestep), ``episode`` (index of t
 the recording) and, when given, ``iteration`` (the training iteration: one value per file, so
 that files of one training run sharing a ``recording_id`` line up on it when opened together).
 
-Entity paths (:data:`ENTITY_PATHS`, plus :data:`ACTION_ENTITY_PATHS` for the env's action type
-and ``lagrange/<name>`` per multiplier): the map under ``world/map`` (static), the robot's pose
+Entity paths (:func:`~crllk.recording.entities.entity_paths`, plus
+:data:`~crllk.recording.entities.ACTION_ENTITY_PATHS` for the env's action type and
+``lagrange/<name>`` per multiplier): the map under ``world/map`` (static), the robot's pose
 ``world/robot`` (one row per step) with its labelled footprint, heading arrow and camera (a
 pinhole in pixels carrying the camera image), the trail of the current episode
 ``world/trail``, per-step scalars ``reward/...``, ``cost/...``, ``lane_pose/...``,
@@ -38,7 +39,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -66,12 +67,7 @@ from crllk.recording.blueprint import episode_ranges, make_blueprint
 from crllk.recording.entities import (
     ACTION_ENTITY_PATHS,
     CAMERA,
-    COST_COLLISION,
-    COST_LANE,
-    EPISODE_COLLISIONS,
     EPISODE_DISTANCE,
-    EPISODE_ENTITY_PATHS,
-    EPISODE_LANE_COST,
     EPISODE_LENGTH,
     EVENTS,
     FOOTPRINT,
@@ -84,11 +80,13 @@ from crllk.recording.entities import (
     OBJECTS,
     REWARD,
     ROBOT,
-    SERIES_NAMES,
     TILES,
     TRAIL,
     WHITE_MARKINGS,
     YELLOW_MARKINGS,
+    cost_path,
+    episode_path,
+    episode_paths,
     series_name,
 )
 from crllk.recording.viewer import (
@@ -102,6 +100,7 @@ from crllk.sim import constants as C
 from crllk.sim.physics import Physics
 from crllk.sim.texture import DECOR_RGB, ROAD_RGB, WHITE_RGB, YELLOW_RGB
 from crllk.tasks.config import CameraConfig
+from crllk.tasks.constraints import Constraint
 
 if TYPE_CHECKING:
     from crllk.envs.batched import BatchedLaneKeepingEnv
@@ -134,8 +133,9 @@ _OBJECT_RGB = {"duckie": (250, 215, 40), "cone": (245, 105, 15), "barrier": (220
                "duckiebot": (40, 40, 45), "bus": (240, 190, 25), "truck": (50, 100, 200),
                "tree": (50, 140, 50), "sign_blank": (235, 235, 235)}
 """Box colour of each object kind (the main colour of its parts in the MuJoCo scene)."""
-_SERIES_RGB = {REWARD: (60, 180, 75), COST_LANE: (230, 25, 75), COST_COLLISION: (255, 99, 71),
-               LATERAL: (0, 130, 200), HEADING_ERROR: (245, 130, 48)}
+_SERIES_RGB = {REWARD: (60, 180, 75), LATERAL: (0, 130, 200), HEADING_ERROR: (245, 130, 48)}
+_COST_RGB = ((230, 25, 75), (255, 99, 71), (145, 30, 180), (70, 200, 200))
+"""Colours of the constraints' cost series, in the task's constraint order (repeating)."""
 
 
 @dataclass(frozen=True)
@@ -218,8 +218,8 @@ class _Step:
     image: np.ndarray
     action: np.ndarray
     reward: float
-    cost_lane: float
-    cost_collision: float
+    costs: dict[str, float]
+    """Per-step cost by constraint name."""
     lateral: float
     heading_error: float
 
@@ -261,8 +261,10 @@ class _Recorder:
     """Logs one recording's map, steps and episode boundaries to a rerun stream."""
 
     def __init__(self, rec: rr.RecordingStream, control_timestep: float, action_type: str,
-                 iteration: int | None, multipliers: dict[str, float] | None) -> None:
+                 constraints: Sequence[Constraint], iteration: int | None,
+                 multipliers: dict[str, float] | None) -> None:
         self.rec = rec
+        self.constraints = tuple(constraints)
         self.dt = control_timestep
         self.action_type = action_type
         self.action_paths = ACTION_ENTITY_PATHS[action_type]
@@ -278,7 +280,7 @@ class _Recorder:
 
     def blueprint(self) -> rrb.Blueprint:
         """The layout for this recording's action type, multipliers and episodes so far."""
-        return make_blueprint(self.action_type,
+        return make_blueprint(self.action_type, self.constraints,
                               [path.removeprefix(LAGRANGE_PREFIX) for path in self.multipliers],
                               episode_ranges(self.episode_stats) if self.episode_stats else None)
 
@@ -324,17 +326,20 @@ class _Recorder:
                                         image_plane_distance=_CAMERA_PLANE), static=True)
 
     def _log_series_styles(self) -> None:
-        """Names and colours of the series (:data:`SERIES_NAMES`); per-episode points large."""
-        for path, colour in _SERIES_RGB.items():
-            self.rec.log(path, rr.SeriesLines(names=SERIES_NAMES[path], colors=colour),
-                         static=True)
+        """Names and colours of the series (:func:`series_name`); per-episode points large."""
+        colours = {**_SERIES_RGB, **{cost_path(c.name): _COST_RGB[k % len(_COST_RGB)]
+                                     for k, c in enumerate(self.constraints)}}
+        for path, colour in colours.items():
+            self.rec.log(path, rr.SeriesLines(names=series_name(path, self.constraints),
+                                              colors=colour), static=True)
         for path in self.multipliers:
             self.rec.log(path, rr.SeriesLines(names=series_name(path)), static=True)
         for path in self.action_paths:
             self.rec.log(path, rr.SeriesPoints(names=series_name(path), marker_sizes=2.0),
                          static=True)
-        for path in EPISODE_ENTITY_PATHS:
-            self.rec.log(path, rr.SeriesPoints(names=SERIES_NAMES[path], markers="diamond",
+        for path in episode_paths(self.constraints):
+            self.rec.log(path, rr.SeriesPoints(names=series_name(path, self.constraints),
+                                               markers="diamond",
                                                marker_sizes=_EPISODE_MARKER_SIZE), static=True)
 
     def _set_time(self) -> None:
@@ -363,8 +368,9 @@ class _Recorder:
             xyzw=[0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2)])))
         rec.log(TRAIL, rr.LineStrips3D([self.trail]))
         rec.log(IMAGE, rr.Image(step.image))
-        values = {REWARD: step.reward, COST_LANE: step.cost_lane,
-                  COST_COLLISION: step.cost_collision, LATERAL: step.lateral,
+        values = {REWARD: step.reward,
+                  **{cost_path(name): value for name, value in step.costs.items()},
+                  LATERAL: step.lateral,
                   HEADING_ERROR: step.heading_error,
                   **dict(zip(self.action_paths, step.action.tolist(), strict=True)),
                   **self.multipliers}
@@ -378,11 +384,12 @@ class _Recorder:
         reason = termination or "time limit"
         self.rec.log(EVENTS, rr.TextLog(
             f"episode {self.episode} ends ({reason}) after {stats.length} steps: "
-            f"distance {stats.distance:.3f} m, mean lane cost {stats.lane_cost:.3f} dm, "
-            f"collisions {stats.collisions:g}", level="WARN" if termination else "INFO"))
+            f"distance {stats.distance:.3f} m, "
+            + ", ".join(f"{c.name} {stats.costs[c.name]:.3g} ({c.aggregate}, {c.unit})"
+                        for c in self.constraints), level="WARN" if termination else "INFO"))
         for path, value in ((EPISODE_DISTANCE, stats.distance),
-                            (EPISODE_LANE_COST, stats.lane_cost),
-                            (EPISODE_COLLISIONS, stats.collisions),
+                            *((episode_path(c.name), stats.costs[c.name])
+                              for c in self.constraints),
                             (EPISODE_LENGTH, stats.length)):
             self.rec.log(path, rr.Scalars(float(value)))
         self.episode_stats.append(stats)
@@ -466,16 +473,16 @@ def _read_step(env: BatchedLaneKeepingEnv, nxt: TensorDictBase, action: np.ndarr
     outcome = env.tasks[0].outcome
     return _Step(pose=env.physics[0].pose(), image=_camera_image(env, nxt, clock),
                  action=np.atleast_1d(action).astype(np.float64),
-                 reward=float(nxt["reward"][0]), cost_lane=float(nxt["cost_lane"][0]),
-                 cost_collision=float(nxt["cost_collision"][0]),
-                 lateral=outcome.lane_pose.lateral,
-                 heading_error=outcome.lane_pose.heading_error)
+                 reward=float(nxt["reward"][0]),
+                 costs={c.name: float(nxt[c.cost_key][0]) for c in env.constraints},
+                 lateral=outcome.lateral,
+                 heading_error=outcome.heading_error)
 
 
 def _play(env: BatchedLaneKeepingEnv, policy: Policy, episodes: int, recorder: _Recorder,
           render_clock: _Clock) -> list[EpisodeStats]:
     """Step ``env`` until sub-environment 0 finished ``episodes`` episodes, logging it."""
-    accumulator = EpisodeAccumulator(1)
+    accumulator = EpisodeAccumulator(1, env.constraints)
     finished: list[EpisodeStats] = []
     td = env.reset()
     with recorder.clock:
@@ -488,9 +495,7 @@ def _play(env: BatchedLaneKeepingEnv, policy: Policy, episodes: int, recorder: _
         step = _read_step(env, nxt, action, render_clock)
         with recorder.clock:
             recorder.log_step(step)
-        ended = accumulator.add_step(*(nxt[key][:1].reshape(1).numpy() for key in
-                                       ("reward", "cost_lane", "cost_collision", "done",
-                                        "truncated")))
+        ended = accumulator.add_transition(nxt[:1])
         if ended:
             with recorder.clock:
                 recorder.end_episode(ended[0], env.tasks[0].outcome.termination)
@@ -539,7 +544,8 @@ def record_episodes(env: BatchedLaneKeepingEnv, policy: Policy, episodes: int,
     if not sinks:
         return RecordingReport(None, 0, 0, 0.0, warnings=tuple(problems))
     recorder = _Recorder(rr.RecordingStream(application_id, recording_id=recording_id),
-                         env.config.control_timestep, env.action_type, iteration, multipliers)
+                         env.config.control_timestep, env.action_type, env.constraints,
+                         iteration, multipliers)
     render_clock = _Clock()
     exploration = ExplorationType.DETERMINISTIC if deterministic else ExplorationType.RANDOM
     try:

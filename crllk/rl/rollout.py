@@ -14,11 +14,11 @@ from typing import Any
 import numpy as np
 import torch
 from tensordict import TensorDictBase
-from torchrl.envs import EnvBase
 from torchrl.envs.utils import ExplorationType, set_exploration_type, step_mdp
 
 from crllk.envs.batched import BatchedLaneKeepingEnv
 from crllk.envs.episodes import EpisodeAccumulator, EpisodeStats, Summary, summarise
+from crllk.tasks.constraints import Constraint
 
 
 @dataclass
@@ -29,6 +29,7 @@ class EvaluationResult:
 
     episodes: list[EpisodeStats]
     summary: Summary
+    constraints: tuple[Constraint, ...] = ()
     terminations: list[str | None] = field(default_factory=list)
     actions: list[np.ndarray] = field(default_factory=list)
     directions: list[str | None] = field(default_factory=list)
@@ -43,7 +44,7 @@ def episode_quotas(episodes: int, num_envs: int) -> np.ndarray:
 
 
 @torch.no_grad()
-def run_episodes(env: EnvBase, policy: Callable[[TensorDictBase], TensorDictBase],
+def run_episodes(env: BatchedLaneKeepingEnv, policy: Callable[[TensorDictBase], TensorDictBase],
                  episodes: int, *, deterministic: bool = True,
                  sample_seed: int | None = None) -> EvaluationResult:
     """Plays ``episodes`` full episodes with ``policy`` from a fresh reset of ``env``.
@@ -63,14 +64,15 @@ def run_episodes(env: EnvBase, policy: Callable[[TensorDictBase], TensorDictBase
         return _run_episodes(env, policy, episodes, deterministic)
 
 
-def _run_episodes(env: EnvBase, policy: Callable[[TensorDictBase], TensorDictBase],
+def _run_episodes(env: BatchedLaneKeepingEnv, policy: Callable[[TensorDictBase], TensorDictBase],
                   episodes: int, deterministic: bool) -> EvaluationResult:
     num_envs = int(env.batch_size[0])
     quotas = episode_quotas(episodes, num_envs)
     played = np.zeros(num_envs, dtype=np.int64)
     by_env: list[list[tuple[Any, ...]]] = [[] for _ in range(num_envs)]
     tasks = getattr(env, "tasks", [None] * num_envs)
-    accumulator = EpisodeAccumulator(num_envs)
+    constraints = env.constraints
+    accumulator = EpisodeAccumulator(num_envs, constraints)
     current_actions: list[list[np.ndarray]] = [[] for _ in range(num_envs)]
     exploration = ExplorationType.DETERMINISTIC if deterministic else ExplorationType.RANDOM
     td = env.reset()
@@ -84,9 +86,7 @@ def _run_episodes(env: EnvBase, policy: Callable[[TensorDictBase], TensorDictBas
                 current_actions[i].append(actions[i])
             terminations = [getattr(getattr(task, "outcome", None), "termination", None)
                             for task in tasks]
-            finished = accumulator.add_step(
-                *(nxt[key].reshape(num_envs).numpy()
-                  for key in ("reward", "cost_lane", "cost_collision", "done", "truncated")))
+            finished = accumulator.add_transition(nxt)
             for stats in finished:
                 i = stats.env_index
                 if played[i] < quotas[i]:
@@ -98,7 +98,8 @@ def _run_episodes(env: EnvBase, policy: Callable[[TensorDictBase], TensorDictBas
             td = env.maybe_reset(step_mdp(stepped))  # after reading the termination reasons
     ordered = [by_env[k % num_envs][k // num_envs] for k in range(episodes)]
     stats = [entry[0] for entry in ordered]
-    return EvaluationResult(episodes=stats, summary=summarise(stats),
+    return EvaluationResult(episodes=stats, summary=summarise(stats, constraints),
+                            constraints=tuple(constraints),
                             terminations=[entry[1] for entry in ordered],
                             actions=[entry[2] for entry in ordered],
                             directions=[entry[3] for entry in ordered],

@@ -21,6 +21,7 @@ from crllk.maps import DuckietownMap, load_map
 from crllk.paths import task_file, task_names
 from crllk.sim.constants import PHYSICS_TIMESTEP
 from crllk.sim.motor import MotorConfig
+from crllk.tasks.constraints import AGGREGATES, BUILTIN, DEFAULT, SIGNALS, Constraint
 
 
 @dataclass(frozen=True)
@@ -73,6 +74,8 @@ class TaskConfig:
     spawn: SpawnConfig = field(default_factory=SpawnConfig)
     motor: MotorConfig = field(default_factory=MotorConfig)
     camera: CameraConfig = field(default_factory=CameraConfig)
+    constraints: tuple[Constraint, ...] = tuple(BUILTIN[name] for name in DEFAULT)
+    """What the task constrains (:mod:`crllk.tasks.constraints`); its costs, in this order."""
 
     @property
     def control_timestep(self) -> float:
@@ -118,11 +121,13 @@ def parse_task(settings: Mapping[str, Any], *, name: str, dmap: DuckietownMap,
             continue
         if key in _SECTIONS:
             kwargs[key] = _parse_section(_SECTIONS[key], value, source, key)
+        elif key == "constraints":
+            kwargs[key] = parse_constraints(value, source)
         elif key in _SCALARS:
             kwargs[key] = _check_value(TaskConfig, key, value, source, key)
         else:
             raise ConfigError(source, key, f"unknown setting (known: map, "
-                              f"{', '.join((*_SCALARS, *_SECTIONS))})")
+                              f"{', '.join((*_SCALARS, *_SECTIONS, 'constraints'))})")
     config = TaskConfig(name=name, map=dmap, source=str(source), **kwargs)
     if config.horizon <= 0:
         raise ConfigError(source, "horizon", f"must be positive, got {config.horizon}")
@@ -140,6 +145,50 @@ def parse_task(settings: Mapping[str, Any], *, name: str, dmap: DuckietownMap,
                           f"{config.control_rate:g} Hz does not divide the {_PHYSICS_RATE:g} Hz "
                           "physics rate (use e.g. 10, 15, 20, 30, 40, 60)")
     return config
+
+
+def parse_constraints(value: Any, source: str | Path) -> tuple[Constraint, ...]:
+    """A task's ``constraints``: a list whose entries name a built-in constraint (``lane``,
+    ``collision``, ``crossing``) or spell one out as a mapping with ``name``, ``signal``,
+    ``aggregate``, ``unit`` and ``metric``."""
+    if not isinstance(value, list | tuple) or not value:
+        raise ConfigError(source, "constraints", f"expected a non-empty list, got {value!r}")
+    out: list[Constraint] = []
+    for k, entry in enumerate(value):
+        where = f"constraints[{k}]"
+        if isinstance(entry, str):
+            if entry not in BUILTIN:
+                raise ConfigError(source, where, f"unknown constraint {entry!r} (known: "
+                                  f"{', '.join(BUILTIN)}; or a mapping with "
+                                  f"{', '.join(f.name for f in dataclasses.fields(Constraint))})")
+            out.append(BUILTIN[entry])
+            continue
+        if not isinstance(entry, Mapping):
+            raise ConfigError(source, where, f"expected a name or a mapping, got {entry!r}")
+        fields = [f.name for f in dataclasses.fields(Constraint)]
+        unknown = sorted(set(entry) - set(fields))
+        missing = [f for f in fields if f not in entry]
+        if unknown or missing:
+            problem = f"unknown keys {unknown}" if unknown else f"missing keys {missing}"
+            raise ConfigError(source, where, f"{problem} (a constraint has {', '.join(fields)})")
+        if not all(isinstance(entry[f], str) and entry[f] for f in fields):
+            raise ConfigError(source, where, "every key needs a non-empty string")
+        if entry["signal"] not in SIGNALS:
+            raise ConfigError(source, f"{where}.signal", f"unknown signal {entry['signal']!r} "
+                              f"(known: {', '.join(SIGNALS)})")
+        if entry["aggregate"] not in AGGREGATES:
+            raise ConfigError(source, f"{where}.aggregate", f"must be one of "
+                              f"{', '.join(AGGREGATES)}, got {entry['aggregate']!r}")
+        out.append(Constraint(**{f: entry[f] for f in fields}))
+    seen: set[str] = set()
+    for k, constraint in enumerate(out):
+        if not constraint.name.isidentifier():
+            raise ConfigError(source, f"constraints[{k}].name",
+                              f"must be an identifier, got {constraint.name!r}")
+        if constraint.name in seen:
+            raise ConfigError(source, f"constraints[{k}]", f"{constraint.name!r} appears twice")
+        seen.add(constraint.name)
+    return tuple(out)
 
 
 def _merge(base: dict[str, Any], overrides: dict[str, Any]) -> dict[str, Any]:
@@ -192,4 +241,4 @@ def _number(value: Any, source: str | Path, where: str, *, allow_negative: bool)
 
 
 __all__ = ["CameraConfig", "MotorConfig", "SpawnConfig", "TaskConfig", "load_task_config",
-           "parse_task"]
+           "parse_constraints", "parse_task"]

@@ -1,8 +1,10 @@
 """Lane keeping on a Duckietown map as a dm-control task.
 
 Per control step (30 Hz by default): the action becomes wheel duty cycles; the reward is the
-forward progress along the lane (m); ``cost_lane`` is |lateral offset| in decimetres (10 off
-the road); ``cost_collision`` is 1 on the step that ends in a collision or a road departure.
+forward progress along the lane (m); the task computes every per-step signal of
+:data:`crllk.tasks.constraints.SIGNALS` (lane deviation in decimetres, 10 off the road; 1 on the
+step that ends in a collision or a road departure; 1 on a step that crosses a lane line) and
+reports ``cost_<name>`` for each constraint the task declares (``constraints``).
 The episode terminates (discount 0) when a footprint check point leaves the road, the chassis
 touches an obstacle or the physics diverges; the 512-step time limit is a truncation.
 """
@@ -11,7 +13,7 @@ from __future__ import annotations
 
 import functools
 import math
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -21,12 +23,15 @@ from dm_control.suite import base
 from dm_env import specs
 
 from crllk.maps import DuckietownMap, LanePose, MapObject
+from crllk.maps.lanes import LANE_OFFSET
+from crllk.maps.markings import white_lateral
 from crllk.maps.obstacles import ObstacleIndex, footprint_points
 from crllk.sim import constants as C
 from crllk.sim.motor import clip_duty
 from crllk.sim.physics import Physics, check_points
 from crllk.tasks.actions import discrete_duty, drive_turn_duty, velocity_steering_duty
 from crllk.tasks.config import TaskConfig, load_task_config
+from crllk.tasks.constraints import Constraint
 
 OBSERVATIONS = ("pixels", "state")
 ACTIONS = ("discrete", "continuous", "duckietown", "duty")
@@ -50,14 +55,46 @@ _METRES_TO_DECIMETRES = 10.0
 
 @dataclass(frozen=True)
 class StepOutcome:
-    """What one control step did; the task keeps the last one for its hooks."""
+    """What one control step did."""
 
     progress: float
-    lane_pose: LanePose
-    cost_lane: float
-    cost_collision: float
+    """Forward progress along the lane (m)."""
+    lateral: float
+    heading_error: float
+    on_road: bool
+    along: float
+    lane: int
+    """The lane pose after the step (:class:`~crllk.maps.LanePose`, its lane as an index into
+    the map's lanes)."""
+    signals: dict[str, float]
+    """Every per-step signal of :data:`~crllk.tasks.constraints.SIGNALS`, by name."""
     termination: str | None
     """None, or why the episode ended: 'off_road', 'collision' or 'unstable'."""
+
+    def cost(self, constraint: Constraint) -> float:
+        """The step's cost of ``constraint``."""
+        return self.signals[constraint.signal]
+
+
+@dataclass
+class EpisodeState:
+    """Everything the task carries from one step of an episode to the next. Snapshots save
+    and restore it whole (:meth:`LaneKeeping.episode_state`), so a field added here is part of
+    every checkpoint without further code; fields hold plain values only."""
+
+    history: list[tuple[float, float]] = field(default_factory=list)
+    """Duty cycles (left, right) commanded, newest first."""
+    previous_pose: tuple[float, float, float] | None = None
+    """The axle pose (x, y, yaw) before the current step."""
+    outcome: StepOutcome | None = None
+    """The last step's (or the reset's) outcome."""
+    encounter: bool = False
+    """Whether this episode started in front of an obstacle (``spawn.encounters``)."""
+    start_direction: str | None = None
+    """The episode's start lane: ``"intended"`` or ``"reverse"`` loop direction of the map
+    (None where the map is not one loop)."""
+    hit_object: int | None = None
+    """Index in the map's objects of the obstacle the episode ended on, if any."""
 
 
 def state_feature_names(config: TaskConfig) -> list[str]:
@@ -92,19 +129,12 @@ class LaneKeeping(base.Task):
         self.map: DuckietownMap = config.map
         self.observation_type = observation
         self.action_type = action
-        self._history: list[tuple[float, float]] = []
-        """Duty cycles (left, right) commanded, newest first."""
-        self._outcome: StepOutcome | None = None
-        self._previous_pose: tuple[float, float, float] | None = None
+        self.episode = EpisodeState()
+        """The running episode's state."""
         self.obstacles = obstacle_index(self.map)
         """The map's obstacles in the lane frame (state features and encounter spawns)."""
-        self.encounter = False
-        """Whether this episode started in front of an obstacle (``spawn.encounters``)."""
-        self.start_direction: str | None = None
-        """The episode's start lane: ``"intended"`` or ``"reverse"`` loop direction of the map
-        (None where the map is not one loop)."""
-        self.hit_object: int | None = None
-        """Index in the map's objects of the obstacle the episode ended on, if any."""
+        self._lane_lines = (-LANE_OFFSET, white_lateral(self.map.tile_size))
+        """Lateral offsets (m) of the yellow centre line and the white edge line."""
         self._blocking = [(lane, o) for lane in self.map.lanes
                           for o in self.obstacles.on_lane(lane)
                           if o.lateral_left < _BLOCKING_HALF_WIDTH
@@ -123,39 +153,46 @@ class LaneKeeping(base.Task):
             main = specs.Array((cam.height, cam.width, 3), np.uint8, name="pixels")
         else:
             main = specs.Array((len(state_feature_names(self.config)),), np.float64, name="state")
-        return {main.name: main,
-                "cost_lane": specs.Array((), np.float64, name="cost_lane"),
-                "cost_collision": specs.Array((), np.float64, name="cost_collision")}
+        costs = {c.cost_key: specs.Array((), np.float64, name=c.cost_key)
+                 for c in self.config.constraints}
+        return {main.name: main, **costs}
 
     # ----- episode ----------------------------------------------------------------------
     def initialize_episode(self, physics: Physics) -> None:
-        x, y, yaw = self._spawn_pose()
+        encounter = self._draw_encounter()
+        x, y, yaw = self._spawn_pose(encounter)
         physics.set_pose(x, y, yaw)
         physics.forward()
-        self._history = [(0.0, 0.0)] * command_history_length(self.config)
-        self._previous_pose = (x, y, yaw)
         pose = self.map.lane_pose(x, y, yaw)
-        self._outcome = StepOutcome(0.0, pose, self._lane_cost(pose), 0.0, None)
-        self.start_direction = self.map.direction_of(pose.lane)
-        self.hit_object = None
+        signals = {"lane_deviation": self._lane_cost(pose), "collision": 0.0,
+                   "lane_crossing": 0.0}
+        self.episode = EpisodeState(
+            history=[(0.0, 0.0)] * command_history_length(self.config),
+            previous_pose=(x, y, yaw), outcome=self._outcome(0.0, pose, signals, None),
+            encounter=encounter, start_direction=self.map.direction_of(pose.lane))
         super().initialize_episode(physics)
 
-    def _spawn_pose(self) -> tuple[float, float, float]:
-        """A random start: with probability ``spawn.encounters`` (when some obstacle blocks a
-        lane) in front of a blocking obstacle, otherwise on a random road tile and lane."""
+    def _draw_encounter(self) -> bool:
+        """Whether the episode starts in front of an obstacle: with probability
+        ``spawn.encounters``, when some obstacle blocks a lane."""
         spawn = self.config.spawn
-        self.encounter = bool(self._blocking) and spawn.encounters > 0 and \
+        return bool(self._blocking) and spawn.encounters > 0 and \
             self.random.uniform() < spawn.encounters
+
+    def _spawn_pose(self, encounter: bool) -> tuple[float, float, float]:
+        """A random start: in front of a blocking obstacle (``encounter``), otherwise on a
+        random road tile and lane."""
+        spawn = self.config.spawn
         tiles = self.map.road_tiles
         for _ in range(_SPAWN_ATTEMPTS):
-            if self.encounter:
+            if encounter:
                 lane, along = self._encounter_start()
             else:
                 tile = tiles[self.random.randint(len(tiles))]
                 lanes = self.map.tile_lanes(tile.column, tile.row)
                 lane = lanes[self.random.randint(len(lanes))]
                 along = self.random.uniform(0.0, lane.length)
-            offsets = spawn.encounter_lateral_offset if self.encounter else spawn.lateral_offset
+            offsets = spawn.encounter_lateral_offset if encounter else spawn.lateral_offset
             lateral = self.random.uniform(*offsets)
             x, y, heading = lane.point_at(along, lateral)
             yaw = heading + self.random.uniform(*spawn.heading_error)
@@ -189,8 +226,8 @@ class LaneKeeping(base.Task):
         duty = self._duty(action)
         if not (math.isfinite(duty[0]) and math.isfinite(duty[1])):
             raise ValueError(f"action {action!r} is not finite")
-        self._history = [duty, *self._history[:-1]]
-        self._previous_pose = physics.pose()
+        self.episode.history = [duty, *self.episode.history[:-1]]
+        self.episode.previous_pose = physics.pose()
         physics.set_wheel_duty(duty)
 
     def _duty(self, action) -> tuple[float, float]:
@@ -207,8 +244,9 @@ class LaneKeeping(base.Task):
     def after_step(self, physics: Physics) -> None:
         x, y, yaw = physics.pose()
         pose = self.map.lane_pose(x, y, yaw)
-        px, py, _ = self._previous_pose
-        heading = self._outcome.lane_pose.lane.heading_at(px, py)
+        px, py, _ = self.episode.previous_pose
+        previous = self.episode.outcome
+        heading = self.map.lanes[previous.lane].heading_at(px, py)
         progress = (x - px) * math.cos(heading) + (y - py) * math.sin(heading)
         termination = None
         if physics.diverged:
@@ -217,82 +255,102 @@ class LaneKeeping(base.Task):
             termination = "off_road"
         elif physics.touches_obstacle():
             termination = "collision"
-            self.hit_object = min(range(len(self.map.objects)), key=lambda k: _footprint_gap(
-                self.map.objects[k], x, y, yaw))
+            self.episode.hit_object = min(range(len(self.map.objects)), key=lambda k: (
+                _footprint_gap(self.map.objects[k], x, y, yaw)))
         off_road = termination == "off_road" or not pose.on_road
-        cost_lane = self.config.off_road_lane_cost if off_road else self._lane_cost(pose)
-        cost_collision = 1.0 if termination in ("off_road", "collision") else 0.0
-        self._outcome = StepOutcome(progress, pose, cost_lane, cost_collision, termination)
+        signals = {
+            "lane_deviation": self.config.off_road_lane_cost if off_road
+            else self._lane_cost(pose),
+            "collision": 1.0 if termination in ("off_road", "collision") else 0.0,
+            "lane_crossing": 1.0 if self._crosses_line(previous, pose) else 0.0,
+        }
+        self.episode.outcome = self._outcome(progress, pose, signals, termination)
+
+    def _outcome(self, progress: float, pose: LanePose, signals: dict[str, float],
+                 termination: str | None) -> StepOutcome:
+        return StepOutcome(progress, pose.lateral, pose.heading_error, pose.on_road, pose.along,
+                           self._lane_index[id(pose.lane)], signals, termination)
+
+    def _crosses_line(self, before: StepOutcome, after: LanePose) -> bool:
+        """Whether the robot's centre went from one side of a lane line to the other (both
+        poses on the road)."""
+        if not (before.on_road and after.on_road):
+            return False
+        return any((before.lateral - line) * (after.lateral - line) < 0.0
+                   for line in self._lane_lines)
 
     def _lane_cost(self, pose: LanePose) -> float:
         if not pose.on_road:
             return self.config.off_road_lane_cost
         return abs(pose.lateral) * _METRES_TO_DECIMETRES
 
+    @functools.cached_property
+    def _lane_index(self) -> dict[int, int]:
+        return {id(lane): k for k, lane in enumerate(self.map.lanes)}
+
     @property
     def command_history(self) -> list[tuple[float, float]]:
         """Wheel duties (left, right) of the last steps, newest first: those still in flight
         through the motor delay and the newest one."""
-        return self._history
+        return self.episode.history
 
     @property
     def outcome(self) -> StepOutcome:
-        """The last step's progress, lane pose, costs and termination reason."""
-        return self._outcome
+        """The last step's progress, lane pose, signals and termination reason."""
+        return self.episode.outcome
+
+    @property
+    def lane_pose(self) -> LanePose:
+        """The lane pose after the last step."""
+        o = self.episode.outcome
+        return LanePose(o.lateral, o.heading_error, o.on_road, o.along, self.map.lanes[o.lane])
+
+    @property
+    def encounter(self) -> bool:
+        return self.episode.encounter
+
+    @property
+    def start_direction(self) -> str | None:
+        return self.episode.start_direction
+
+    @property
+    def hit_object(self) -> int | None:
+        return self.episode.hit_object
 
     # ----- snapshots --------------------------------------------------------------------
     def episode_state(self) -> dict[str, Any]:
-        """Everything the hooks carry between steps, and the spawn generator's state, as
-        plain Python values (see :meth:`load_episode_state`)."""
+        """The whole :class:`EpisodeState` and the spawn generator's state, as plain Python
+        values (see :meth:`load_episode_state`)."""
         name, keys, position, has_gauss, cached_gaussian = self.random.get_state(legacy=True)
-        return {"history": [list(duty) for duty in self._history],
-                "encounter": self.encounter,
-                "start_direction": self.start_direction, "hit_object": self.hit_object,
-                "previous_pose": self._previous_pose,
-                "outcome": None if self._outcome is None else self._outcome_state(),
+        return {"episode": asdict(self.episode),
                 "random": (name, keys.tolist(), position, has_gauss, cached_gaussian)}
 
     def load_episode_state(self, state: dict[str, Any]) -> None:
         """Restore an :meth:`episode_state`."""
-        self._history = [(left, right) for left, right in state["history"]]
-        self.encounter = bool(state.get("encounter", False))
-        self.start_direction = state.get("start_direction")
-        self.hit_object = state.get("hit_object")
-        previous = state["previous_pose"]
-        self._previous_pose = None if previous is None else tuple(previous)
-        outcome = state["outcome"]
-        self._outcome = None if outcome is None else self._outcome_from_state(outcome)
+        episode = dict(state["episode"])
+        outcome = episode["outcome"]
+        episode["outcome"] = None if outcome is None else StepOutcome(**outcome)
+        episode["history"] = [tuple(duty) for duty in episode["history"]]
+        if episode["previous_pose"] is not None:
+            episode["previous_pose"] = tuple(episode["previous_pose"])
+        self.episode = EpisodeState(**episode)
         name, keys, position, has_gauss, cached_gaussian = state["random"]
         self.random.set_state((name, np.asarray(keys, np.uint32), position, has_gauss,
                                cached_gaussian))
 
-    def _outcome_state(self) -> dict[str, Any]:
-        outcome, pose = self._outcome, self._outcome.lane_pose
-        return {"progress": outcome.progress, "cost_lane": outcome.cost_lane,
-                "cost_collision": outcome.cost_collision, "termination": outcome.termination,
-                "lateral": pose.lateral, "heading_error": pose.heading_error,
-                "on_road": pose.on_road, "along": pose.along,
-                "lane": self.map.lanes.index(pose.lane)}
-
-    def _outcome_from_state(self, state: dict[str, Any]) -> StepOutcome:
-        pose = LanePose(state["lateral"], state["heading_error"], state["on_road"],
-                        state["along"], self.map.lanes[state["lane"]])
-        return StepOutcome(state["progress"], pose, state["cost_lane"], state["cost_collision"],
-                           state["termination"])
-
     def get_reward(self, physics: Physics) -> float:
-        return self._outcome.progress
+        return self.episode.outcome.progress
 
     def get_termination(self, physics: Physics) -> float | None:
-        return 0.0 if self._outcome.termination else None
+        return 0.0 if self.episode.outcome.termination else None
 
     def get_observation(self, physics: Physics) -> dict[str, Any]:
         main = self.main_observation(physics)
         if self.observation_type == "state":
             main = np.array(main)
+        outcome = self.episode.outcome
         return {self.observation_type: main,
-                "cost_lane": np.float64(self._outcome.cost_lane),
-                "cost_collision": np.float64(self._outcome.cost_collision)}
+                **{c.cost_key: np.float64(outcome.cost(c)) for c in self.config.constraints}}
 
     def main_observation(self, physics: Physics) -> np.ndarray | list[float]:
         """The camera image (uint8 HxWx3) or the state features (a list of floats)."""
@@ -321,13 +379,13 @@ class LaneKeeping(base.Task):
 
     def state_feature_list(self, physics: Physics) -> list[float]:
         """:meth:`state_features` as a list of floats."""
-        pose = self._outcome.lane_pose
+        pose = self.lane_pose
         _x, _y, yaw = physics.pose()
         return [pose.lateral, math.sin(pose.heading_error), math.cos(pose.heading_error),
                 physics.forward_speed(yaw), physics.yaw_rate(),
                 *self.map.curvature_ahead(pose, _CURVATURE_LOOKAHEAD),
                 *self.obstacle_features(pose),
-                *(value for duty in self._history for value in duty)]
+                *(value for duty in self.episode.history for value in duty)]
 
 
 @functools.lru_cache(maxsize=16)

@@ -2,16 +2,18 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import torch
 
 import crllk  # noqa: F401  (chooses the headless GL backend before torchrl imports mujoco)
 from crllk.envs.batched import BatchedLaneKeepingEnv, make_env
+from crllk.errors import ConfigError
 from crllk.rl.lagrange import Multiplier, make_multiplier
 from crllk.rl.loss import AdvantageModules, LagrangianPPOLoss, make_advantage_modules
 from crllk.rl.models import ModelConfig, make_actor, make_critic, make_shared_critic
-from crllk.tasks.constraints import COSTS
+from crllk.tasks.constraints import Constraint
 from crllk.tasks.lane_keeping import state_feature_names
 from crllk.training.config import TrainConfig
 
@@ -52,7 +54,8 @@ def build_learner(config: TrainConfig, env: BatchedLaneKeepingEnv) -> Learner:
     commands_dim = env.observation_spec["commands"].shape[-1] if model.policy_commands else 0
     actor = make_actor(obs, shape, config.action.name, env.action_spec, model,
                        names if obs == "state" else None, commands_dim=commands_dim)
-    value_keys = {"reward": "state_value", **{c: f"state_value_{c}" for c in COSTS}}
+    costs = [c.name for c in env.constraints]
+    value_keys = {"reward": "state_value", **{c: f"state_value_{c}" for c in costs}}
     critic_obs = "state" if model.critic_input == "state" else obs
     critic_shape = env.observation_spec[critic_obs].shape[1:]
     critic_names = names if critic_obs == "state" else None
@@ -65,21 +68,31 @@ def build_learner(config: TrainConfig, env: BatchedLaneKeepingEnv) -> Learner:
                                      feature_names=critic_names)
                    for name, key in value_keys.items()}
     ppo = config.ppo
-    loss = LagrangianPPOLoss(actor, critics["reward"], {c: critics[c] for c in COSTS},
+    loss = LagrangianPPOLoss(actor, critics["reward"], {c: critics[c] for c in costs},
                              clip_epsilon=ppo.clip_epsilon, entropy_coeff=ppo.entropy_coeff,
                              critic_coeff=ppo.critic_coeff,
                              normalize_advantage=ppo.normalize_advantage)
     advantages = make_advantage_modules(ppo.gamma, ppo.gae_lambda, critics["reward"],
-                                        {c: critics[c] for c in COSTS}, keys=loss.tensor_keys)
+                                        {c: critics[c] for c in costs}, keys=loss.tensor_keys)
     optimizer = torch.optim.Adam(loss.parameters(), lr=ppo.lr)
     return Learner(actor, critics, loss, advantages, optimizer)
 
 
-def build_multipliers(config: TrainConfig) -> dict[str, Multiplier]:
+def build_multipliers(config: TrainConfig, constraints: Sequence[Constraint]
+                      ) -> dict[str, Multiplier]:
+    """One multiplier per constraint of the task, from ``algo.constraints.<name>``.
+
+    Raises:
+        ConfigError: if a constraint has no settings there.
+    """
     algo = config.algo
     multipliers = {}
-    for name in COSTS:
-        c = getattr(algo, name)
+    for name in (c.name for c in constraints):
+        if name not in algo.constraints:
+            raise ConfigError("override", f"algo.constraints.{name}",
+                              f"the task constrains {name!r} but no multiplier is set for it "
+                              f"(set: {', '.join(algo.constraints) or 'none'})")
+        c = algo.constraints[name]
         common = {"threshold": c.threshold, "initial": c.initial, "max_value": c.max_value,
                   "schedule": algo.schedule, "frozen": algo.frozen}
         if algo.multiplier == "pid":
@@ -97,4 +110,4 @@ def build_run(config: TrainConfig) -> tuple[BatchedLaneKeepingEnv, Learner,
     torch.manual_seed(config.seed)
     generator = torch.Generator().manual_seed(config.seed)
     env = build_env(config, num_envs=config.num_envs, seed=config.seed, training=True)
-    return env, build_learner(config, env), build_multipliers(config), generator
+    return env, build_learner(config, env), build_multipliers(config, env.constraints), generator

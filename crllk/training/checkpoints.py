@@ -11,14 +11,15 @@ from tensordict import TensorDictBase
 
 from crllk.envs.batched import BatchedLaneKeepingEnv
 from crllk.envs.episodes import EpisodeAccumulator
+from crllk.errors import ConfigError
 from crllk.files import atomic_write
 from crllk.rl.lagrange import Multiplier
-from crllk.tasks.constraints import COSTS
 from crllk.training.build import Learner
 from crllk.training.config import TrainConfig
 
-CHECKPOINT_FORMAT = 1
-"""Version of the checkpoint layout written by :mod:`crllk.training.loop`."""
+CHECKPOINT_FORMAT = 2
+"""Version of the checkpoint layout written by :mod:`crllk.training.loop` (2: constraints by
+name, the task's episode state whole)."""
 
 
 def save_checkpoint(path: str | Path, state: dict[str, Any]) -> Path:
@@ -31,8 +32,12 @@ def load_checkpoint(path: str | Path) -> dict[str, Any]:
     """Loads a checkpoint written by :func:`save_checkpoint`."""
     path = Path(path)
     state = torch.load(path, map_location="cpu", weights_only=False)
-    if not isinstance(state, dict) or state.get("format") != CHECKPOINT_FORMAT:
-        raise ValueError(f"{path}: not a crllk checkpoint of format {CHECKPOINT_FORMAT}")
+    if not isinstance(state, dict) or "format" not in state:
+        raise ConfigError(path, "format", "not a crllk checkpoint")
+    if state["format"] != CHECKPOINT_FORMAT:
+        raise ConfigError(path, "format", f"written in format {state['format']}, this version "
+                          f"reads format {CHECKPOINT_FORMAT}: resume it with the version that "
+                          "wrote it, or start a new run")
     return state
 
 
@@ -64,7 +69,7 @@ def restore(state: dict[str, Any], learner: Learner, multipliers: dict[str, Mult
     learner.optimizer.load_state_dict(state["optimizer"])
     for name, multiplier in multipliers.items():
         multiplier.load_state_dict(state["multipliers"][name])
-    learner.loss.set_multipliers([multipliers[c].value for c in COSTS])
+    learner.loss.set_multipliers({name: m.value for name, m in multipliers.items()})
     episodes.load_state_dict(state["episodes"])
     env.load_sim_state(state["env"])
     torch.set_rng_state(state["torch_rng"])

@@ -4,7 +4,7 @@ The YAML files in ``crllk/conf`` hold the values and their comments; the datacla
 the types and the ranges. :func:`validate` merges a composed Hydra config into the schema (a
 string where a number belongs fails there) and checks every range, raising a
 :class:`~crllk.errors.ConfigError` that names the field, e.g.
-``override: algo.lane.threshold: must be >= 0, got -1.0``.
+``override: algo.constraints.lane.threshold: must be >= 0, got -1.0``.
 """
 
 from __future__ import annotations
@@ -26,6 +26,8 @@ SOURCE = "override"
 
 @dataclass
 class ConstraintConfig:
+    """The multiplier of one constraint (``algo.constraints.<name>``)."""
+
     threshold: float = 0.0
     initial: float = 0.0
     step_size: float = 0.05
@@ -40,8 +42,8 @@ class AlgoConfig:
     multiplier: str = "dual"
     schedule: str = "batch"
     frozen: bool = False
-    lane: ConstraintConfig = field(default_factory=ConstraintConfig)
-    collision: ConstraintConfig = field(default_factory=ConstraintConfig)
+    constraints: dict[str, ConstraintConfig] = field(default_factory=dict)
+    """Multiplier settings by constraint name; every constraint of the task needs one."""
 
 
 @dataclass
@@ -167,13 +169,12 @@ _CHOICES = {
 _POSITIVE = ("total_frames", "num_envs", "rollout_steps", "threads", "checkpoint_every",
              "ppo.epochs", "ppo.minibatch_size", "ppo.lr", "ppo.max_grad_norm",
              "model.hidden", "model.feature_dim", "eval.episodes", "eval.num_envs",
-             "algo.lane.step_size", "algo.collision.step_size", "reward_scale")
+             "reward_scale")
 _NON_NEGATIVE = ("seed", "encounter_horizon", "eval.every", "teacher.coeff", "teacher.frames",
                  "teacher.final", "record_every", "eval.seed", "ppo.entropy_coeff",
-                 "ppo.critic_coeff",
-                 "algo.lane.threshold", "algo.lane.initial", "algo.lane.kp", "algo.lane.kd",
-                 "algo.collision.threshold", "algo.collision.initial", "algo.collision.kp",
-                 "algo.collision.kd", "action.baseline_collision_weight")
+                 "ppo.critic_coeff", "action.baseline_collision_weight")
+_CONSTRAINT_POSITIVE = ("step_size",)
+_CONSTRAINT_NON_NEGATIVE = ("threshold", "initial", "kp", "kd")
 _UNIT_INTERVAL = ("ppo.gamma", "ppo.gae_lambda", "ppo.lr_final_fraction", "encounters")
 _PORTS = 65536
 """TCP ports are 1 ... 65535."""
@@ -206,11 +207,17 @@ def validate(cfg: DictConfig | dict[str, Any]) -> TrainConfig:
     if not 0 < config.ppo.clip_epsilon < 1:
         raise ConfigError(SOURCE, "ppo.clip_epsilon",
                           f"must lie in (0, 1), got {config.ppo.clip_epsilon}")
-    for name in ("lane", "collision"):
-        constraint: ConstraintConfig = getattr(config.algo, name)
+    for name, constraint in config.algo.constraints.items():
+        where = f"algo.constraints.{name}"
+        for key in _CONSTRAINT_POSITIVE:
+            _check_range(f"{where}.{key}", getattr(constraint, key), lambda v: v > 0,
+                         "must be > 0")
+        for key in _CONSTRAINT_NON_NEGATIVE:
+            _check_range(f"{where}.{key}", getattr(constraint, key), lambda v: v >= 0,
+                         "must be >= 0")
         if constraint.max_value < constraint.initial:
-            raise ConfigError(SOURCE, f"algo.{name}.max_value",
-                              f"must be >= algo.{name}.initial ({constraint.initial}), "
+            raise ConfigError(SOURCE, f"{where}.max_value",
+                              f"must be >= {where}.initial ({constraint.initial}), "
                               f"got {constraint.max_value}")
     if not 0 < config.live_port < _PORTS:
         raise ConfigError(SOURCE, "live_port", f"must lie in [1, {_PORTS - 1}], got "
@@ -221,6 +228,16 @@ def validate(cfg: DictConfig | dict[str, Any]) -> TrainConfig:
     if config.task_file and not Path(config.task_file).exists():
         raise ConfigError(SOURCE, "task_file", f"no such file: {config.task_file}")
     return config
+
+
+def upgrade(stored: DictConfig) -> DictConfig:
+    """A run's saved ``config.yaml`` in the current layout: multipliers that an older version
+    kept at ``algo.lane`` and ``algo.collision`` move to ``algo.constraints.<name>``."""
+    algo = stored.get("algo")
+    if algo is not None and "constraints" not in algo:
+        moved = {name: algo.pop(name) for name in ("lane", "collision") if name in algo}
+        algo["constraints"] = moved
+    return stored
 
 
 def _get(config: Any, dotted: str) -> Any:
@@ -236,4 +253,4 @@ def _check_range(key: str, value: float, ok: Any, problem: str) -> None:
         raise ConfigError(SOURCE, key, f"{problem}, got {value}")
 
 
-__all__ = ["TrainConfig", "validate"]
+__all__ = ["ConstraintConfig", "TrainConfig", "upgrade", "validate"]

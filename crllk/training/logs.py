@@ -14,15 +14,10 @@ from tensordict import TensorDictBase
 
 import crllk  # noqa: F401  (chooses the headless GL backend before torchrl imports mujoco)
 from crllk.files import atomic_write_text
+from crllk.tasks.constraints import Constraint
 from crllk.training.config import TrainConfig
 
 DISCRETE_ACTION_NAMES = ("left", "right", "straight")
-
-
-LOSS_KEYS = ("loss_objective", "loss_critic", "loss_cost_critic", "loss_entropy",
-             "loss_imitation", "entropy",
-             "kl_approx", "clip_fraction", "explained_variance", "explained_variance_lane",
-             "explained_variance_collision")
 
 
 class CsvLog:
@@ -57,19 +52,25 @@ def _format(value: Any) -> Any:
     return f"{value:.6g}" if isinstance(value, float) else value
 
 
-def metric_columns(action: str) -> list[str]:
-    columns = ["iteration", "frames", "time_s", "frames_per_s", "episodes", "J_R", "J_clane",
-               "J_coll", "episode_length", "encounter_episodes", "J_coll_encounter",
-               "lambda_lane", "lambda_collision", *LOSS_KEYS]
+def metric_columns(action: str, constraints: Sequence[Constraint],
+                   loss_keys: Sequence[str]) -> list[str]:
+    """``metrics.csv``: counters, J_R and each constraint's metric over the episodes from the
+    task's own spawns, the same over encounter episodes, each multiplier, the loss terms
+    (``loss_keys``), the actions."""
+    metrics = [c.metric for c in constraints]
+    columns = ["iteration", "frames", "time_s", "frames_per_s", "episodes", "J_R", *metrics,
+               "episode_length", "encounter_episodes", *(f"{m}_encounter" for m in metrics),
+               *(f"lambda_{c.name}" for c in constraints), *loss_keys]
     if action == "discrete":
         return columns + [f"action_{n}" for n in DISCRETE_ACTION_NAMES]
     return [*columns, "action_velocity_mean", "action_steering_mean", "action_steering_std"]
 
 
-EVAL_COLUMNS = ["iteration", "frames", "time_s", "evaluation_s", "episodes", "J_R", "J_clane",
-                "J_coll", "episode_length", "satisfied"]
-"""``time_s``: wall time of the run when the evaluation began (earlier evaluations included);
-``evaluation_s``: how long this evaluation took."""
+def eval_columns(constraints: Sequence[Constraint]) -> list[str]:
+    """``eval.csv``: ``time_s`` is the wall time of the run when the evaluation began (earlier
+    evaluations included); ``evaluation_s`` how long this evaluation took."""
+    return ["iteration", "frames", "time_s", "evaluation_s", "episodes", "J_R",
+            *(c.metric for c in constraints), "episode_length", "satisfied"]
 
 
 def action_columns(batch: TensorDictBase, action: str) -> dict[str, float]:
@@ -86,16 +87,17 @@ def action_columns(batch: TensorDictBase, action: str) -> dict[str, float]:
             "action_steering_std": float(flat[:, 1].std())}
 
 
-def progress_text(row: dict[str, Any]) -> str:
+def progress_text(row: dict[str, Any], constraints: Sequence[Constraint]) -> str:
     def show(value: float, digits: int) -> str:
         return "-" if math.isnan(value) else f"{value:.{digits}f}"
 
-    return (f"J_R {show(row['J_R'], 2)} m  J_clane {show(row['J_clane'], 2)} dm  "
-            f"J_coll {show(row['J_coll'], 2)}  λ {row['lambda_lane']:.2f}/"
-            f"{row['lambda_collision']:.2f}")
+    metrics = "  ".join(f"{c.metric} {show(row[c.metric], 2)}" for c in constraints)
+    multipliers = "/".join(f"{row[f'lambda_{c.name}']:.2f}" for c in constraints)
+    return f"J_R {show(row['J_R'], 2)} m  {metrics}  λ {multipliers}"
 
 
-def print_last_evaluation(path: Path, config: TrainConfig) -> None:
+def print_last_evaluation(path: Path, config: TrainConfig,
+                          constraints: Sequence[Constraint]) -> None:
     """One line on the latest evaluation in ``eval.csv``, if there is one."""
     if not path.exists():
         return
@@ -104,8 +106,10 @@ def print_last_evaluation(path: Path, config: TrainConfig) -> None:
     if not rows:
         return
     last = rows[-1]
-    verdict = "both constraints hold" if last["satisfied"] == "1" else "constraints violated"
+    verdict = ("every constraint holds" if last["satisfied"] == "1"
+               else "constraints violated")
+    metrics = ", ".join(
+        f"{c.metric} {float(last[c.metric]):.3f} {c.unit} "
+        f"(≤ {config.algo.constraints[c.name].threshold})" for c in constraints)
     print(f"evaluation at {last['frames']} frames ({last['episodes']} episodes): "
-          f"J_R {float(last['J_R']):.2f} m, J_clane {float(last['J_clane']):.3f} dm "
-          f"(≤ {config.algo.lane.threshold}), J_coll {float(last['J_coll']):.3f} "
-          f"(≤ {config.algo.collision.threshold}): {verdict}", flush=True)
+          f"J_R {float(last['J_R']):.2f} m, {metrics}: {verdict}", flush=True)

@@ -1,30 +1,50 @@
-"""The training loop."""
+"""The training loop: :func:`train` trains or resumes one run.
+
+One iteration (:func:`learn`, then the logs):
+
+1. collect ``rollout_steps`` control steps in each of ``num_envs`` simulations;
+2. update the multipliers λ from the episodes that finished (dual ascent);
+3. compute GAE advantages for the reward and each cost, and run PPO epochs on the combined
+   advantage (A_r − Σλ_i A_ci) / (1 + Σλ_i);
+4. append a row to ``metrics.csv``; every ``checkpoint_every`` iterations (and at the end)
+   write ``checkpoints/last.pt`` atomically; every ``eval.every`` iterations append an
+   evaluation to ``eval.csv`` (the same episodes as ``python -m crllk.evaluate``); every
+   ``record_every`` iterations record one evaluation episode with rerun; with ``live`` send
+   the row and the recordings to the run's live view (:mod:`crllk.recording.live`).
+
+The checkpoint holds the networks, the optimiser, the multipliers, the counters, the random
+generators, the simulations' full state and the running episode sums, so ``resume=true``
+continues exactly where the uninterrupted run would have been.
+"""
 
 from __future__ import annotations
 
 import sys
 import time
+from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+import torch
 from omegaconf import OmegaConf
+from tensordict import TensorDictBase
 from tqdm import tqdm
 
 import crllk  # noqa: F401  (chooses the headless GL backend before torchrl imports mujoco)
 from crllk.envs.batched import BatchedLaneKeepingEnv
-from crllk.envs.episodes import EpisodeAccumulator, summarise
+from crllk.envs.episodes import EpisodeAccumulator, EpisodeStats, summarise
 from crllk.errors import ConfigError
 from crllk.files import atomic_write_text
 from crllk.rl.lagrange import Multiplier
 from crllk.rl.rollout import collect, run_episodes
-from crllk.tasks.constraints import COSTS
+from crllk.tasks.constraints import Constraint
 from crllk.training.build import Learner, build_env, build_run
 from crllk.training.checkpoints import checkpoint_state, load_checkpoint, restore, save_checkpoint
 from crllk.training.config import TrainConfig
 from crllk.training.logs import (
-    EVAL_COLUMNS,
     CsvLog,
     action_columns,
+    eval_columns,
     metric_columns,
     print_last_evaluation,
     progress_text,
@@ -41,18 +61,14 @@ def train(config: TrainConfig) -> Path:
     """Trains (or resumes) one run; returns its directory."""
     run_dir = config.resolved_run_dir()
     checkpoint_path = run_dir / "checkpoints" / "last.pt"
-    resuming = config.resume and checkpoint_path.exists()
-    if not resuming and (run_dir / "metrics.csv").exists():
-        if not config.resume:
-            raise ConfigError(SOURCE_RUN, "run_dir", f"{run_dir} already holds a run; pass "
-                              "resume=true to continue it or choose another run_dir")
-        for stale in ("metrics.csv", "eval.csv"):  # killed before its first checkpoint
-            (run_dir / stale).unlink(missing_ok=True)
+    resuming = prepare_run_dir(config, run_dir, checkpoint_path)
     env, learner, multipliers, generator = build_run(config)
+    constraints = env.constraints
     lock = lock_run_dir(run_dir)
-    episodes = EpisodeAccumulator(config.num_envs)
-    metrics = CsvLog(run_dir / "metrics.csv", metric_columns(config.action.name))
-    evaluations = CsvLog(run_dir / "eval.csv", EVAL_COLUMNS)
+    episodes = EpisodeAccumulator(config.num_envs, constraints)
+    metrics = CsvLog(run_dir / "metrics.csv",
+                     metric_columns(config.action.name, constraints, learner.loss.out_keys))
+    evaluations = CsvLog(run_dir / "eval.csv", eval_columns(constraints))
     eval_env = record_env = None
     iteration, frames, elapsed = 0, 0, 0.0
 
@@ -69,42 +85,29 @@ def train(config: TrainConfig) -> Path:
         atomic_write_text(run_dir / "config.yaml", OmegaConf.to_yaml(OmegaConf.structured(config)))
         carry = env.reset()
         print(f"run directory: {run_dir}", flush=True)
-    live = open_live_view(config, run_dir)
+    live = open_live_view(config, run_dir, constraints)
 
     bar = tqdm(total=config.total_frames, initial=frames, unit="frame", dynamic_ncols=True,
                disable=not config.progress, file=sys.stderr)
     started = time.perf_counter() - elapsed
     while frames < config.total_frames:
         iteration_start = time.perf_counter()
-        batch, carry = collect(env, learner.actor, carry, config.rollout_steps)
-        finished = episodes.add_batch(batch)
-        update_multipliers(multipliers, finished)
-        learner.loss.set_multipliers([multipliers[c].value for c in COSTS])
-        learner.loss.set_imitation_coeff(imitation_coeff(config, frames))
-        for group in learner.optimizer.param_groups:
-            group["lr"] = learning_rate(config, frames)
-        env.teacher_active = imitation_coeff(config, frames + batch.numel()) > 0
-        shape_signals(batch, config, env.config.off_road_lane_cost)
-        losses = ppo_update(learner, batch, config, generator)
+        batch, carry, finished, losses = learn(config, env, learner, multipliers, generator,
+                                               episodes, carry, frames)
         iteration += 1
         frames += batch.numel()
 
-        summary = summarise([e for e in finished if not e.encounter])
-        encounters = summarise([e for e in finished if e.encounter])
         row = {"iteration": iteration, "frames": frames,
                "time_s": time.perf_counter() - started,
                "frames_per_s": batch.numel() / (time.perf_counter() - iteration_start),
-               "episodes": summary.episodes, "J_R": summary.J_R, "J_clane": summary.J_clane,
-               "J_coll": summary.J_coll, "episode_length": summary.length,
-               "encounter_episodes": encounters.episodes, "J_coll_encounter": encounters.J_coll,
-               "lambda_lane": multipliers["lane"].value,
-               "lambda_collision": multipliers["collision"].value,
+               **episode_columns(finished, constraints),
+               **{f"lambda_{name}": m.value for name, m in multipliers.items()},
                **losses, **action_columns(batch, config.action.name)}
         metrics.append(row)
         if live is not None:
             live.log_iteration(row)
         bar.update(batch.numel())
-        bar.set_postfix_str(progress_text(row), refresh=False)
+        bar.set_postfix_str(progress_text(row, constraints), refresh=False)
 
         if config.eval.every and (iteration % config.eval.every == 0
                                   or frames >= config.total_frames):
@@ -125,33 +128,82 @@ def train(config: TrainConfig) -> Path:
     bar.close()
     if live is not None:
         live.close()
-    env.close()
-    for extra_env in (eval_env, record_env):
-        if extra_env is not None:
-            extra_env.close()
+    for used in (env, eval_env, record_env):
+        if used is not None:
+            used.close()
     lock.close()
     print(f"done: {frames} frames in {iteration} iterations; run directory: {run_dir}",
           flush=True)
-    print_last_evaluation(evaluations.path, config)
+    print_last_evaluation(evaluations.path, config, constraints)
     return run_dir
+
+
+def learn(config: TrainConfig, env: BatchedLaneKeepingEnv, learner: Learner,
+          multipliers: dict[str, Multiplier], generator: torch.Generator,
+          episodes: EpisodeAccumulator, carry: TensorDictBase, frames: int
+          ) -> tuple[TensorDictBase, TensorDictBase, list[EpisodeStats], dict[str, float]]:
+    """One iteration of learning after ``frames``: collect ``rollout_steps`` steps of every
+    sub-environment, update the multipliers from the episodes that finished, run the PPO
+    epochs. Returns the batch, the tensordict to continue from, the finished episodes and the
+    mean loss terms."""
+    batch, carry = collect(env, learner.actor, carry, config.rollout_steps)
+    finished = episodes.add_batch(batch)
+    update_multipliers(multipliers, finished)
+    learner.loss.set_multipliers({name: m.value for name, m in multipliers.items()})
+    learner.loss.set_imitation_coeff(imitation_coeff(config, frames))
+    for group in learner.optimizer.param_groups:
+        group["lr"] = learning_rate(config, frames)
+    env.teacher_active = imitation_coeff(config, frames + batch.numel()) > 0
+    shape_signals(batch, config, env.config)
+    losses = ppo_update(learner, batch, config, generator)
+    return batch, carry, finished, losses
+
+
+def prepare_run_dir(config: TrainConfig, run_dir: Path, checkpoint_path: Path) -> bool:
+    """Whether the run resumes from ``checkpoint_path``; clears the logs of a run killed
+    before its first checkpoint.
+
+    Raises:
+        ConfigError: if ``run_dir`` holds a run and ``resume`` is off.
+    """
+    resuming = config.resume and checkpoint_path.exists()
+    if not resuming and (run_dir / "metrics.csv").exists():
+        if not config.resume:
+            raise ConfigError(SOURCE_RUN, "run_dir", f"{run_dir} already holds a run; pass "
+                              "resume=true to continue it or choose another run_dir")
+        for stale in ("metrics.csv", "eval.csv"):
+            (run_dir / stale).unlink(missing_ok=True)
+    return resuming
+
+
+def episode_columns(finished: Sequence[EpisodeStats], constraints: Sequence[Constraint]
+                    ) -> dict[str, float]:
+    """The iteration's episode metrics: from the task's own spawns, and each constraint's
+    metric over the episodes that started in front of an obstacle (``<metric>_encounter``)."""
+    summary = summarise([e for e in finished if not e.encounter], constraints)
+    encounters = summarise([e for e in finished if e.encounter], constraints)
+    return {"episodes": summary.episodes, "J_R": summary.J_R, **summary.J,
+            "episode_length": summary.length, "encounter_episodes": encounters.episodes,
+            **{f"{metric}_encounter": value for metric, value in encounters.J.items()}}
 
 
 def evaluate(config: TrainConfig, env: BatchedLaneKeepingEnv, learner: Learner, iteration: int,
              frames: int, time_s: float) -> dict[str, Any]:
     """Episodes of the sampled policy from the evaluation seed (spawns and action samples),
-    as ``python -m crllk.evaluate`` plays them; whether both constraints hold."""
+    as ``python -m crllk.evaluate`` plays them; whether every constraint holds."""
     began = time.perf_counter()
     env.set_seed(config.eval.seed)
     summary = run_episodes(env, learner.actor, config.eval.episodes, deterministic=False,
                            sample_seed=config.eval.seed).summary
-    satisfied = (summary.J_clane <= config.algo.lane.threshold
-                 and summary.J_coll <= config.algo.collision.threshold)
+    satisfied = all(summary.J[c.metric] <= config.algo.constraints[c.name].threshold
+                    for c in env.constraints)
     return {"iteration": iteration, "frames": frames, "time_s": time_s, **summary.as_row(),
             "episode_length": summary.length, "satisfied": int(satisfied),
             "evaluation_s": time.perf_counter() - began}
 
 
-def open_live_view(config: TrainConfig, run_dir: Path) -> LiveView | None:
+def open_live_view(config: TrainConfig, run_dir: Path, constraints: Sequence[Constraint]
+                   ) -> LiveView | None:
     """The run's live view (``live``), or None; rerun is imported only when it is on. A live
     view that cannot start is a warning: training goes on."""
     if config.live == "none":
@@ -159,8 +211,8 @@ def open_live_view(config: TrainConfig, run_dir: Path) -> LiveView | None:
     from crllk.recording.live import live_url, open_live
 
     live, problems = open_live(config.live, config.live_port, f"crllk-live-{run_dir.resolve()}",
-                               {"J_clane": config.algo.lane.threshold,
-                                "J_coll": config.algo.collision.threshold})
+                               constraints, {c.name: config.algo.constraints[c.name].threshold
+                                             for c in constraints})
     for message in problems:
         print(f"warning: {message}", file=sys.stderr, flush=True)
     if live is not None:

@@ -20,7 +20,7 @@ from omegaconf.errors import OmegaConfBaseException
 
 from crllk.errors import ConfigError
 from crllk.training.checkpoints import load_checkpoint
-from crllk.training.config import TrainConfig, validate
+from crllk.training.config import TrainConfig, upgrade, validate
 
 CONFIG_FILE = "config.yaml"
 CHECKPOINT_FILE = Path("checkpoints") / "last.pt"
@@ -41,7 +41,7 @@ def load_run_config(run_dir: str | Path) -> TrainConfig:
     except (OmegaConfBaseException, OSError, ValueError) as err:
         raise ConfigError(path, "<file>", f"unreadable: {err}") from None
     stored["run_dir"] = str(run_dir)
-    return validate(stored)
+    return validate(upgrade(stored))
 
 
 def load_run_checkpoint(run_dir: str | Path) -> dict[str, Any]:

@@ -10,23 +10,27 @@ from tensordict import TensorDictBase
 import crllk  # noqa: F401  (chooses the headless GL backend before torchrl imports mujoco)
 from crllk.envs.episodes import EpisodeStats
 from crllk.rl.lagrange import Multiplier
+from crllk.tasks.config import TaskConfig
 from crllk.training.build import Learner
 from crllk.training.config import TrainConfig
-from crllk.training.logs import LOSS_KEYS
 
 
-def shape_signals(batch: TensorDictBase, config: TrainConfig, off_road_lane_cost: float) -> None:
+def shape_signals(batch: TensorDictBase, config: TrainConfig, task: TaskConfig) -> None:
     """The signals the learner sees, in place: the reward scaled by ``reward_scale``, and, with
-    ``absorbing_off_road``, the lane cost of every later step of a terminated episode folded
-    into its last step: the robot stays off the road at ``off_road_lane_cost`` (dm) per step
-    for ever, γ·c_off / (1 − γ) in discounted sum. Otherwise ending an episode early would cut
-    its lane cost short and a large λ_lane would make leaving the road look cheap."""
+    ``absorbing_off_road``, the lane-deviation cost of every later step of a terminated
+    episode folded into its last step: the robot stays off the road at the task's
+    ``off_road_lane_cost`` (dm) per step for ever, γ·c_off / (1 − γ) in discounted sum.
+    Otherwise ending an episode early would cut its lane cost short and a large λ_lane would
+    make leaving the road look cheap."""
     nxt = batch["next"]
     nxt["reward"] = nxt["reward"] * config.reward_scale
     if config.absorbing_off_road:
         gamma = config.ppo.gamma
-        tail = off_road_lane_cost * gamma / (1.0 - gamma) if gamma < 1.0 else 0.0
-        nxt["cost_lane"] = nxt["cost_lane"] + tail * nxt["terminated"].to(torch.float32)
+        tail = task.off_road_lane_cost * gamma / (1.0 - gamma) if gamma < 1.0 else 0.0
+        for constraint in task.constraints:
+            if constraint.signal == "lane_deviation":
+                key = constraint.cost_key
+                nxt[key] = nxt[key] + tail * nxt["terminated"].to(torch.float32)
 
 
 def ppo_update(learner: Learner, batch: TensorDictBase, config: TrainConfig,
@@ -34,7 +38,8 @@ def ppo_update(learner: Learner, batch: TensorDictBase, config: TrainConfig,
     """GAE for every signal, then ``epochs`` passes of minibatch PPO; mean diagnostics."""
     learner.advantages(batch)
     flat = batch.reshape(-1)
-    size, sums, count = flat.shape[0], dict.fromkeys(LOSS_KEYS, 0.0), 0
+    keys = learner.loss.out_keys
+    size, sums, count = flat.shape[0], dict.fromkeys(keys, 0.0), 0
     # clip each network's gradient on its own, so large value errors do not shrink the policy's
     networks = {id(n): n for n in (learner.actor, *learner.critics.values())}  # step
     groups = [list(network.parameters()) for network in networks.values()]
@@ -49,7 +54,7 @@ def ppo_update(learner: Learner, batch: TensorDictBase, config: TrainConfig,
             for group in groups:
                 torch.nn.utils.clip_grad_norm_(group, config.ppo.max_grad_norm)
             learner.optimizer.step()
-            for key in LOSS_KEYS:
+            for key in keys:
                 sums[key] += out[key].item()
             count += 1
     return {key: value / count for key, value in sums.items()}
@@ -58,8 +63,8 @@ def ppo_update(learner: Learner, batch: TensorDictBase, config: TrainConfig,
 def update_multipliers(multipliers: dict[str, Multiplier],
                        episodes: Sequence[EpisodeStats]) -> None:
     """Dual ascent from the finished episodes of the task's own spawn distribution (episodes
-    started in front of an obstacle are left out): Ĵ_clane is an episode's mean lane cost
-    (dm), Ĵ_coll its number of collisions."""
+    started in front of an obstacle are left out): each multiplier from its constraint's
+    episode values (the mean lane cost in dm, the number of collisions, ...)."""
     episodes = [e for e in episodes if not e.encounter]
-    multipliers["lane"].update([e.lane_cost for e in episodes])
-    multipliers["collision"].update([e.collisions for e in episodes])
+    for name, multiplier in multipliers.items():
+        multiplier.update([e.costs[name] for e in episodes])
