@@ -18,7 +18,6 @@ from omegaconf import DictConfig, OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
 from crllk.errors import ConfigError
-from crllk.paths import REPO_ROOT
 
 SOURCE = "override"
 """How errors name where a bad value came from (the command line or the YAML defaults)."""
@@ -148,7 +147,7 @@ class TrainConfig:
 
     def default_run_dir(self) -> Path:
         stem = Path(self.task_file).stem if self.task_file else self.task_name
-        return REPO_ROOT / "runs" / stem / (
+        return Path.cwd() / "runs" / stem / (
             f"{self.algo.name}-{self.action.name}-{self.obs.name}-seed{self.seed}")
 
     def resolved_run_dir(self) -> Path:
