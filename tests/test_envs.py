@@ -13,7 +13,7 @@ from torchrl.envs import RewardSum, TransformedEnv
 from torchrl.envs.utils import check_env_specs
 
 import crllk
-from crllk.envs.batched import BatchedLaneKeepingEnv, make_env, sub_env_seeds
+from crllk.envs.batched import TERMINATIONS, BatchedLaneKeepingEnv, make_env, sub_env_seeds
 from crllk.sim.physics import box_average
 
 TASK = "small_loop"
@@ -71,7 +71,7 @@ def test_specs_match_data(build, observation, action):
     assert env.batch_size == torch.Size([NUM_ENVS])
     assert set(env.reward_keys) == set(REWARD_KEYS)
     observed = set(env.observation_spec.keys(True, True))
-    assert observed == {observation}
+    assert observed == {observation, "termination"}  # the reason is information, not an input
     assert not observed & set(REWARD_KEYS), "costs must never be observed"
 
 
@@ -97,6 +97,7 @@ def test_standing_still_is_truncated_not_terminated(build):
     truncated, terminated = data["next", "truncated"], data["next", "terminated"]
     assert truncated[:, -1].all() and not truncated[:, :-1].any()
     assert not terminated.any()
+    assert not data["next", "termination"].any()
     assert torch.equal(data["next", "done"], truncated)
     assert torch.allclose(data["next", "reward"], torch.zeros(()), atol=1e-3)
 
@@ -110,6 +111,9 @@ def test_termination_is_not_truncation(build):
     assert terminated.any()
     assert not (terminated & data["next", "truncated"]).any()
     assert torch.equal(data["next", "cost_collision"].bool(), terminated)
+    reasons = data["next", "termination"]
+    assert torch.equal(reasons > 0, terminated)
+    assert {TERMINATIONS[k] for k in reasons[terminated].tolist()} == {"off_road"}
 
 
 @pytest.mark.parametrize(("observation", "action", "steps"),

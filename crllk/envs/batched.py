@@ -14,14 +14,16 @@ the task hooks directly, skipping dm_control's ``Environment``. Keys after a ste
   (:attr:`cost_keys`; by default ``"cost_lane"`` in dm and ``"cost_collision"``, 0 or 1);
 - ``"terminated"`` (the task ended the episode: off road, collision, unstable physics),
   ``"truncated"`` (the ``horizon`` time limit was reached without termination) and
-  ``"done" = terminated | truncated``, each bool ``[N, 1]``.
+  ``"done" = terminated | truncated``, each bool ``[N, 1]``; ``"termination"`` (int64
+  ``[N, 1]``) says why, as an index into :data:`TERMINATIONS` (0: not terminated).
 
 Finished sub-environments are reset the TorchRL way: ``reset`` with a ``"_reset"`` mask (as
 ``step_and_maybe_reset``, ``rollout`` and the collectors pass it) resets only those.
 
 Per-sub-environment details for evaluation and visualisation stay on the simulations:
-``env.tasks[i].outcome`` (lane pose, costs, termination reason ``'off_road'``, ``'collision'``
-or ``'unstable'``), ``env.physics[i]`` (pose, speeds) and ``env.step_counts[i]``.
+``env.tasks[i].outcome`` (lane pose, signals), ``env.tasks[i].start_direction`` and
+``hit_object``, ``env.physics[i]`` (pose, speeds) and ``env.step_counts[i]``;
+:class:`crllk.rl.rollout.Rollout` shows each transition before finished ones reset.
 
 Snapshots: ``env.sim_state()`` returns every simulation's full state (MuJoCo, task, spawn
 generator, step counts, last observations) as plain values; ``env.load_sim_state(state)`` on an
@@ -58,6 +60,8 @@ from crllk.tasks.lane_keeping import (
 from crllk.tasks.teacher import Teacher
 
 DONE_KEYS = ("done", "terminated", "truncated")
+TERMINATIONS = (None, "off_road", "collision", "unstable")
+"""The ``"termination"`` entry's codes: why the task ended the episode on this step."""
 
 
 def sub_env_seeds(seed: int | None, num_envs: int) -> list[int]:
@@ -141,6 +145,8 @@ class BatchedLaneKeepingEnv(EnvBase):
         if self.privileged_state:
             entries["state"] = Unbounded(shape=self._states.shape, dtype=torch.float32,
                                          device=self.device)
+        entries["termination"] = Categorical(len(TERMINATIONS), shape=(*n, 1),
+                                             dtype=torch.int64, device=self.device)
         if self.reports_encounters:
             entries["encounter"] = Categorical(2, shape=(*n, 1), dtype=torch.bool,
                                                device=self.device)
@@ -181,7 +187,8 @@ class BatchedLaneKeepingEnv(EnvBase):
         for i in indices:
             self._reset_one(i)
         false = torch.zeros((self.num_envs, 1), dtype=torch.bool)
-        out = {**self._observation_entries(), **{key: false.clone() for key in DONE_KEYS}}
+        out = {**self._observation_entries(), **{key: false.clone() for key in DONE_KEYS},
+               "termination": torch.zeros((self.num_envs, 1), dtype=torch.int64)}
         return self._tensordict(out)
 
     def _reset_one(self, i: int) -> None:
@@ -236,10 +243,12 @@ class BatchedLaneKeepingEnv(EnvBase):
                             *([o.cost(c) for o in outcomes] for c in self.constraints)],
                            dtype=np.float32)
         columns = torch.from_numpy(rewards[:, :, None])
-        terminated = np.array([[o.termination is not None] for o in outcomes])
+        codes = np.array([[TERMINATIONS.index(o.termination)] for o in outcomes])
+        terminated = codes > 0
         truncated = (self.step_counts >= self._horizons())[:, None] & ~terminated
         return {**self._observation_entries(), "reward": columns[0],
                 **dict(zip(self.cost_keys, columns[1:], strict=True)),
+                "termination": torch.from_numpy(codes),
                 "terminated": torch.from_numpy(terminated),
                 "truncated": torch.from_numpy(truncated),
                 "done": torch.from_numpy(terminated | truncated)}
@@ -350,4 +359,4 @@ def make_env(task: str | Path, *, num_envs: int = 1, observation: str = "pixels"
                                  teacher=teacher, commands=commands, device=device)
 
 
-__all__ = ["BatchedLaneKeepingEnv", "make_env", "sub_env_seeds"]
+__all__ = ["TERMINATIONS", "BatchedLaneKeepingEnv", "make_env", "sub_env_seeds"]

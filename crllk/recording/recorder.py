@@ -51,8 +51,9 @@ import rerun.blueprint as rrb
 import torch
 from rerun.chunk import RrdReader
 from tensordict import TensorDictBase
-from torchrl.envs.utils import ExplorationType, set_exploration_type, step_mdp
+from torchrl.envs.utils import ExplorationType, set_exploration_type
 
+from crllk.envs.batched import TERMINATIONS
 from crllk.envs.episodes import EpisodeAccumulator, EpisodeStats
 from crllk.errors import RecordingError
 from crllk.maps import DuckietownMap
@@ -96,6 +97,7 @@ from crllk.recording.viewer import (
     spawn_viewer,
     viewer_listening,
 )
+from crllk.rl.rollout import Rollout
 from crllk.sim import constants as C
 from crllk.sim.physics import Physics
 from crllk.sim.texture import DECOR_RGB, ROAD_RGB, WHITE_RGB, YELLOW_RGB
@@ -468,11 +470,11 @@ def _camera_image(env: BatchedLaneKeepingEnv, nxt: TensorDictBase, clock: _Clock
         return env.physics[0].render_camera(cam.height, cam.width, cam.supersample)
 
 
-def _read_step(env: BatchedLaneKeepingEnv, nxt: TensorDictBase, action: np.ndarray,
-               clock: _Clock) -> _Step:
-    outcome = env.tasks[0].outcome
+def _read_step(env: BatchedLaneKeepingEnv, stepped: TensorDictBase, clock: _Clock) -> _Step:
+    nxt, outcome = stepped["next"], env.tasks[0].outcome
     return _Step(pose=env.physics[0].pose(), image=_camera_image(env, nxt, clock),
-                 action=np.atleast_1d(action).astype(np.float64),
+                 action=np.atleast_1d(stepped["action"][0].detach().cpu().numpy()).astype(
+                     np.float64),
                  reward=float(nxt["reward"][0]),
                  costs={c.name: float(nxt[c.cost_key][0]) for c in env.constraints},
                  lateral=outcome.lateral,
@@ -484,27 +486,27 @@ def _play(env: BatchedLaneKeepingEnv, policy: Policy, episodes: int, recorder: _
     """Step ``env`` until sub-environment 0 finished ``episodes`` episodes, logging it."""
     accumulator = EpisodeAccumulator(1, env.constraints)
     finished: list[EpisodeStats] = []
-    td = env.reset()
+
+    def log(stepped: TensorDictBase) -> None:
+        """Sub-environment 0's step, before a finished episode resets."""
+        step = _read_step(env, stepped, render_clock)
+        with recorder.clock:
+            recorder.log_step(step)
+        ended = accumulator.add_transition(stepped["next"][:1])
+        if ended:
+            termination = TERMINATIONS[int(stepped["next", "termination"][0])]
+            with recorder.clock:
+                recorder.end_episode(ended[0], termination)
+            finished.append(ended[0])
+
+    rollout = Rollout(env, policy)
     with recorder.clock:
         recorder.start_episode(env.physics[0].pose())
     while len(finished) < episodes:
-        td = policy(td)
-        action = td["action"][0].detach().cpu().numpy().copy()
-        stepped = env.step(td)
-        nxt = stepped["next"]
-        step = _read_step(env, nxt, action, render_clock)
-        with recorder.clock:
-            recorder.log_step(step)
-        ended = accumulator.add_transition(nxt[:1])
-        if ended:
-            with recorder.clock:
-                recorder.end_episode(ended[0], env.tasks[0].outcome.termination)
-            finished.append(ended[0])
-            if len(finished) == episodes:
-                break
-        td = env.maybe_reset(step_mdp(stepped))
-        if ended:
-            with recorder.clock:
+        before = len(finished)
+        rollout.step(log)
+        if before < len(finished) < episodes:
+            with recorder.clock:  # the next episode's spawn
                 recorder.start_episode(env.physics[0].pose())
     return finished
 

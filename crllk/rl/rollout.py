@@ -1,4 +1,5 @@
-"""Seeded evaluation episodes of a policy on a batched environment.
+"""Playing a policy on a batched environment: :class:`Rollout`, the one loop that training
+(:func:`collect`), evaluation (:func:`run_episodes`) and recordings step through.
 
 Episode ``k`` of an evaluation runs in sub-environment ``k mod N``: each sub-environment plays
 its share of the episodes one after another from its own spawn seed, so the result depends only
@@ -16,7 +17,7 @@ import torch
 from tensordict import TensorDictBase
 from torchrl.envs.utils import ExplorationType, set_exploration_type, step_mdp
 
-from crllk.envs.batched import BatchedLaneKeepingEnv
+from crllk.envs.batched import TERMINATIONS, BatchedLaneKeepingEnv
 from crllk.envs.episodes import EpisodeAccumulator, EpisodeStats, Summary, summarise
 from crllk.tasks.constraints import Constraint
 
@@ -34,6 +35,31 @@ class EvaluationResult:
     actions: list[np.ndarray] = field(default_factory=list)
     directions: list[str | None] = field(default_factory=list)
     hit_objects: list[int | None] = field(default_factory=list)
+
+
+class Rollout:
+    """Steps ``env`` with ``policy`` from ``td`` (a fresh reset without it). Finished
+    sub-environments reset after each step, once ``on_step`` has seen the transition."""
+
+    def __init__(self, env: BatchedLaneKeepingEnv,
+                 policy: Callable[[TensorDictBase], TensorDictBase],
+                 td: TensorDictBase | None = None) -> None:
+        self.env, self.policy = env, policy
+        self.td = env.reset() if td is None else td
+        """What the policy acts on next."""
+
+    def step(self, on_step: Callable[[TensorDictBase], None] | None = None) -> TensorDictBase:
+        """One control step of every sub-environment; returns the transition (``"next"``
+        holds the step's outputs). ``on_step`` sees it while the simulations still hold the
+        state the step ended in (before finished ones reset)."""
+        self.policy(self.td)
+        stepped = self.env.step(self.td)
+        if on_step is not None:
+            on_step(stepped)
+        env = self.env
+        self.td = env.maybe_reset(step_mdp(stepped, reward_keys=env.reward_keys,
+                                           done_keys=env.done_keys, action_keys=env.action_keys))
+        return stepped
 
 
 def episode_quotas(episodes: int, num_envs: int) -> np.ndarray:
@@ -75,27 +101,28 @@ def _run_episodes(env: BatchedLaneKeepingEnv, policy: Callable[[TensorDictBase],
     accumulator = EpisodeAccumulator(num_envs, constraints)
     current_actions: list[list[np.ndarray]] = [[] for _ in range(num_envs)]
     exploration = ExplorationType.DETERMINISTIC if deterministic else ExplorationType.RANDOM
-    td = env.reset()
+
+    def finish_episodes(stepped: TensorDictBase) -> None:
+        """Episode bookkeeping, while the tasks still hold the ended episodes' details."""
+        nxt = stepped["next"]
+        actions = stepped["action"].numpy()
+        for i in range(num_envs):
+            current_actions[i].append(actions[i].copy())
+        terminations = nxt["termination"].reshape(num_envs).tolist()
+        for stats in accumulator.add_transition(nxt):
+            i = stats.env_index
+            if played[i] < quotas[i]:
+                by_env[i].append((stats, TERMINATIONS[terminations[i]],
+                                  np.stack(current_actions[i]),
+                                  getattr(tasks[i], "start_direction", None),
+                                  getattr(tasks[i], "hit_object", None)))
+                played[i] += 1
+            current_actions[i] = []
+
+    rollout = Rollout(env, policy)
     with set_exploration_type(exploration):
         while (played < quotas).any():
-            policy(td)
-            actions = td["action"].numpy().copy()
-            stepped = env.step(td)
-            nxt = stepped["next"]
-            for i in range(num_envs):
-                current_actions[i].append(actions[i])
-            terminations = [getattr(getattr(task, "outcome", None), "termination", None)
-                            for task in tasks]
-            finished = accumulator.add_transition(nxt)
-            for stats in finished:
-                i = stats.env_index
-                if played[i] < quotas[i]:
-                    by_env[i].append((stats, terminations[i], np.stack(current_actions[i]),
-                                      getattr(tasks[i], "start_direction", None),
-                                      getattr(tasks[i], "hit_object", None)))
-                    played[i] += 1
-                current_actions[i] = []
-            td = env.maybe_reset(step_mdp(stepped))  # after reading the termination reasons
+            rollout.step(finish_episodes)
     ordered = [by_env[k % num_envs][k // num_envs] for k in range(episodes)]
     stats = [entry[0] for entry in ordered]
     return EvaluationResult(episodes=stats, summary=summarise(stats, constraints),
@@ -106,7 +133,7 @@ def _run_episodes(env: BatchedLaneKeepingEnv, policy: Callable[[TensorDictBase],
                             hit_objects=[entry[4] for entry in ordered])
 
 
-__all__ = ["EvaluationResult", "episode_quotas", "run_episodes"]
+__all__ = ["EvaluationResult", "Rollout", "collect", "episode_quotas", "run_episodes"]
 
 
 @torch.no_grad()
@@ -114,10 +141,7 @@ def collect(env: BatchedLaneKeepingEnv, actor: torch.nn.Module, carry: TensorDic
             steps: int) -> tuple[TensorDictBase, TensorDictBase]:
     """``steps`` control steps of every sub-environment with the stochastic policy; returns
     the transitions ``[N, steps]`` and the tensordict to continue from."""
-    transitions = []
+    rollout = Rollout(env, actor, carry)
     with set_exploration_type(ExplorationType.RANDOM):
-        for _ in range(steps):
-            actor(carry)
-            stepped, carry = env.step_and_maybe_reset(carry)
-            transitions.append(stepped)
-    return torch.stack(transitions, dim=1), carry
+        transitions = [rollout.step() for _ in range(steps)]
+    return torch.stack(transitions, dim=1), rollout.td
