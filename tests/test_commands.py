@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import subprocess
+import sys
+
 import mujoco
 import numpy as np
 from PIL import Image
@@ -57,3 +60,13 @@ def test_bench_batched_and_training_figures(capsys, tmp_path):
     assert "training, state (frames/s)" in printed and "training, pixels (frames/s)" in printed
     assert printed.count("met") + printed.count("MISSED") == 6
     assert f"{run}: 12 s (0.2 min) at 200 frames" in printed
+
+
+def test_rendering_processes_exit_without_egl_noise():
+    """Renderers are closed before EGL is terminated: no "Exception ignored" at exit."""
+    probe = ("import crllk; env = crllk.load('small_loop', observation='pixels'); "
+             "env.reset(); env.physics.render_camera(120, 160)")
+    done = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True,
+                          timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert "Exception ignored" not in done.stderr and "Traceback" not in done.stderr, done.stderr

@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import atexit
+import contextlib
 import logging
 import math
+import weakref
 from collections.abc import Sequence
 
 import mujoco
@@ -15,6 +18,26 @@ from crllk.maps import DuckietownMap
 from crllk.sim import constants as C
 from crllk.sim.motor import MotorConfig, clip_duty
 from crllk.sim.scene import compile_scene
+
+_OPEN_RENDERERS: weakref.WeakSet[mujoco.Renderer] = weakref.WeakSet()
+"""Renderers not yet closed: closed at exit while EGL is still up (their finalisers would
+otherwise print EGL errors when the interpreter ends)."""
+
+
+def _track(renderer: mujoco.Renderer) -> None:
+    """Closes ``renderer`` at exit. The first registration comes after the first GL context's
+    (which registers ``eglTerminate``), so it runs before EGL is terminated."""
+    if not _OPEN_RENDERERS:
+        atexit.unregister(_close_open_renderers)
+        atexit.register(_close_open_renderers)
+    _OPEN_RENDERERS.add(renderer)
+
+
+def _close_open_renderers() -> None:
+    for renderer in list(_OPEN_RENDERERS):
+        with contextlib.suppress(Exception):  # exiting: nothing is left to report to
+            renderer.close()
+
 
 log = logging.getLogger(__name__)
 
@@ -204,6 +227,7 @@ class Physics(dm_mujoco.Physics):
         if renderer is None:
             renderer = mujoco.Renderer(self.model.ptr, *size)
             self._renderers[size] = renderer
+            _track(renderer)
         renderer.update_scene(self.data.ptr, camera=camera)
         image = renderer.render()
         if supersample == 1:
