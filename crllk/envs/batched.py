@@ -254,13 +254,8 @@ class BatchedLaneKeepingEnv(EnvBase):
                 "done": torch.from_numpy(terminated | truncated)}
 
     def _horizons(self) -> np.ndarray:
-        """Each sub-environment's time limit (steps): ``spawn.encounter_horizon`` for an
-        episode that started in front of an obstacle, when set, else the task's horizon."""
-        horizon, short = self.config.horizon, self.config.spawn.encounter_horizon
-        if not short:
-            return np.full(len(self.tasks), horizon)
-        return np.array([min(short, horizon) if task.encounter else horizon
-                         for task in self.tasks])
+        """Each sub-environment's time limit (steps, :meth:`TaskConfig.step_limit`)."""
+        return np.array([self.config.step_limit(task.encounter) for task in self.tasks])
 
     def _tensordict(self, entries: dict[str, torch.Tensor]) -> TensorDict:
         """``entries`` on the env's device (set, so TorchRL need not move them again)."""

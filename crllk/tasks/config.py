@@ -82,6 +82,13 @@ class TaskConfig:
         """Seconds per control step."""
         return 1.0 / self.control_rate
 
+    def step_limit(self, encounter: bool = False) -> int:
+        """The time limit (control steps) after which an episode is truncated: ``horizon``, or
+        ``spawn.encounter_horizon`` (when set and shorter) for an episode that started in
+        front of an obstacle. The one definition both environments use."""
+        short = self.spawn.encounter_horizon
+        return min(short, self.horizon) if encounter and short else self.horizon
+
 
 _PHYSICS_RATE = 1.0 / PHYSICS_TIMESTEP
 """Physics steps per second (Hz)."""

@@ -434,7 +434,7 @@ def load(task: str | Path, *, observation: str = "pixels", action: str = "discre
     config = load_task_config(task, overrides)
     physics = Physics.from_map(config.map, config.motor)
     lane_task = LaneKeeping(config, observation=observation, action=action, random=seed)
-    steps = config.horizon
+    steps = config.step_limit()  # a time in seconds for dm-control, a hair under the limit
     return control.Environment(
         physics, lane_task, time_limit=steps * config.control_timestep * (1 - 1e-9),
         control_timestep=config.control_timestep)
