@@ -267,7 +267,8 @@ def test_learning_rate_schedule():
                                       "ppo.lr_final_fraction=0.1", "total_frames=1000"]))
     assert [learning_rate(config, f) for f in (0, 500, 1000, 2000)] == pytest.approx(
         [0.002, 0.0011, 0.0002, 0.0002])
-    constant = validate(compose_config(["ppo.lr=0.002", "total_frames=1000"]))
+    constant = validate(compose_config(["ppo.lr=0.002", "total_frames=1000",
+                                        "ppo.anneal_lr=false"]))
     assert learning_rate(constant, 900) == 0.002
     with pytest.raises(ConfigError, match=r"ppo\.lr_final_fraction"):
         validate(compose_config(["ppo.lr_final_fraction=1.5"]))

@@ -64,7 +64,7 @@ class PPOConfig:
     epochs: int = 10
     minibatch_size: int = 512
     lr: float = 1e-3
-    anneal_lr: bool = False
+    anneal_lr: bool = True
     lr_final_fraction: float = 0.0
     max_grad_norm: float = 1.0
     entropy_coeff: float = 0.01
