@@ -13,7 +13,8 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from crllk.errors import RecordingError
+from crllk.cli import Parser, fail, positive_int
+from crllk.errors import ConfigError
 from crllk.recording.recorder import VIEWERS, RecordingReport, record_episodes
 from crllk.tasks.follower import FollowerPolicy
 
@@ -26,7 +27,7 @@ def _follower_env(args: argparse.Namespace) -> Iterator:
     """A one-simulation env of the command line's task for the scripted follower."""
     from crllk.envs.batched import make_env
 
-    overrides = {"horizon": args.horizon} if args.horizon else None
+    overrides = {"horizon": args.horizon} if args.horizon is not None else None
     env = make_env(args.task, observation=args.obs, action="duty", seed=args.seed,
                    overrides=overrides)
     try:
@@ -59,26 +60,25 @@ def _print_report(report: RecordingReport, wall: float) -> None:
 
 
 def main(argv: Sequence[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(
-        description="Record the scripted lane follower to a rerun .rrd file.")
+    parser = Parser(description="Record the scripted lane follower to a rerun .rrd file.")
     parser.add_argument("--task", default="obstacle_loop")
-    parser.add_argument("--episodes", type=int, default=1)
+    parser.add_argument("--episodes", type=positive_int, default=1)
     parser.add_argument("--out", type=Path, default=Path("outputs/recordings/follower.rrd"))
     parser.add_argument("--obs", choices=("state", "pixels"), default="pixels")
-    parser.add_argument("--horizon", type=int, default=None, help="steps per episode")
+    parser.add_argument("--horizon", type=positive_int, default=None, help="steps per episode")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--viewer", choices=VIEWERS, default="none")
     parser.add_argument("--compare", action="store_true",
                         help="also time the same episodes unrecorded")
     args = parser.parse_args(argv)
-    with _follower_env(args) as env:
-        start = time.perf_counter()
-        try:
+    try:
+        with _follower_env(args) as env:
+            start = time.perf_counter()
             report = record_episodes(env, FollowerPolicy(env), args.episodes, args.out,
                                      viewer=args.viewer)
-        except RecordingError as err:
-            sys.exit(f"error: {err}")
-        wall = time.perf_counter() - start
+            wall = time.perf_counter() - start
+    except ConfigError as err:  # an unknown task, a bad task file, an unwritable path
+        fail(err)
     _print_report(report, wall)
     if args.compare:
         print(f"unrecorded: {_unrecorded_seconds(args):.2f} s wall")

@@ -7,6 +7,7 @@ import sys
 
 import mujoco
 import numpy as np
+import pytest
 from PIL import Image
 
 from crllk import demo, pictures
@@ -70,3 +71,38 @@ def test_rendering_processes_exit_without_egl_noise():
                           timeout=300)
     assert done.returncode == 0, done.stderr[-2000:]
     assert "Exception ignored" not in done.stderr and "Traceback" not in done.stderr, done.stderr
+
+
+@pytest.mark.parametrize(("argv", "problem"), [
+    (["--task", "no_such_map"], "no_such_map: task: unknown task"),
+    (["--episodes", "0"], "argument --episodes: must be at least 1, got 0"),
+    (["--horizon", "0"], "argument --horizon: must be at least 1, got 0"),
+    (["--episodes", "two"], "argument --episodes: expected a whole number, got 'two'"),
+])
+def test_record_command_answers_bad_input_with_one_line(argv, problem, capsys, tmp_path):
+    from crllk import record
+
+    with pytest.raises(SystemExit) as exit_info:
+        record.main([*argv, "--out", str(tmp_path / "r.rrd")])
+    assert exit_info.value.code == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("error: ") and problem in err and len(err.splitlines()) == 1, err
+
+
+@pytest.mark.parametrize(("argv", "problem"), [
+    (["--task", "no_such_map"], "no_such_map: task: unknown task"),
+    (["--steps", "0"], "argument --steps: must be at least 1, got 0"),
+    (["--steps", "-1"], "argument --steps: must be at least 1, got -1"),
+    (["--num-envs", "0"], "argument --num-envs: must be at least 1, got 0"),
+    (["--iterations", "0"], "argument --iterations: must be at least 1, got 0"),
+    (["--runs", "RUN"], "--runs: no eval.csv"),
+])
+def test_bench_command_answers_bad_input_with_one_line(argv, problem, capsys, tmp_path):
+    from crllk.bench import cli as bench
+
+    argv = [str(tmp_path) if a == "RUN" else a for a in argv]
+    with pytest.raises(SystemExit) as exit_info:
+        bench.main(argv)
+    assert exit_info.value.code == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("error: ") and problem in err and len(err.splitlines()) == 1, err

@@ -24,7 +24,7 @@ LAYERS = (
     ("crllk.evaluation",),
     ("crllk.analysis",),
     ("crllk.train", "crllk.evaluate", "crllk.record", "crllk.experiments", "crllk.pictures",
-     "crllk.screenshots", "crllk.demo", "crllk.bench"),
+     "crllk.screenshots", "crllk.demo", "crllk.bench", "crllk.cli"),
 )
 """Bottom to top, in the order data flows: maps, MuJoCo, dm-control tasks, TorchRL
 environments, learning, recording, the trainer, evaluation of runs, analysis, commands."""

@@ -11,7 +11,6 @@ should reach 1,000 steps/s on 2 cores.
 
 from __future__ import annotations
 
-import argparse
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -22,19 +21,23 @@ from crllk.bench.rates import (
     raw_render_rate,
     time_to_constraints,
 )
+from crllk.cli import Parser, fail, positive_int
+from crllk.errors import ConfigError
+from crllk.tasks.config import load_task_config
 
 
 def main(argv: Sequence[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = Parser(description=__doc__.splitlines()[0])
     parser.add_argument("--task", default="small_loop")
-    parser.add_argument("--steps", type=int, default=3000, help="control steps per figure")
-    parser.add_argument("--num-envs", type=int, default=32,
+    parser.add_argument("--steps", type=positive_int, default=3000,
+                        help="control steps per figure")
+    parser.add_argument("--num-envs", type=positive_int, default=32,
                         help="simulations of the batched environment figures")
     parser.add_argument("--batched", action="store_true",
                         help="add batched make_env figures (crllk.envs.batched)")
     parser.add_argument("--training", action="store_true",
                         help="add training frames/s next to environment-only frames/s")
-    parser.add_argument("--iterations", type=int, default=5,
+    parser.add_argument("--iterations", type=positive_int, default=5,
                         help="training iterations per training figure")
     parser.add_argument("--overrides", nargs="*", default=[],
                         help="trainer overrides for the training figures (e.g. num_envs=4)")
@@ -42,6 +45,13 @@ def main(argv: Sequence[str] | None = None) -> None:
                         help="run directories whose eval.csv gives the time to satisfy both "
                              "constraints")
     args = parser.parse_args(argv)
+    for run_dir in args.runs:
+        if not (run_dir / "eval.csv").is_file():
+            fail(f"{run_dir}: --runs: no eval.csv (not a run directory, or no evaluation yet)")
+    try:
+        load_task_config(args.task)
+    except ConfigError as err:
+        fail(err)
     raw = raw_physics_rate(args.task, args.steps)
     render = raw_render_rate(args.task, args.steps)
     print(f"task {args.task}, {args.steps} steps per figure")
