@@ -62,5 +62,17 @@ def main(cfg: DictConfig) -> None:
         raise SystemExit(2) from None
 
 
+def task_paths_as_task_file(argv: list[str]) -> list[str]:
+    """``task=PATH`` (a ``.yaml`` task or Duckietown map file) becomes ``task_file=PATH``, so
+    that ``task=`` takes a name or a path, as in the other commands."""
+    out = []
+    for arg in argv:
+        key, sep, value = arg.partition("=")
+        out.append(f"task_file={value}" if sep and key == "task"
+                   and value.endswith((".yaml", ".yml")) else arg)
+    return out
+
+
 if __name__ == "__main__":
+    sys.argv = [sys.argv[0], *task_paths_as_task_file(sys.argv[1:])]
     main()

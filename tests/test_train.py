@@ -213,11 +213,13 @@ def test_ppo_baseline_weights_follow_the_action_type():
     assert continuous.algo.constraints["collision"].initial == 40.0
 
 
-def test_broken_task_file_names_file_and_field(tmp_path):
+@pytest.mark.parametrize("key", ["task_file", "task"])
+def test_broken_task_file_names_file_and_field(tmp_path, key):
+    """A task file by path, as ``task_file=PATH`` or ``task=PATH``."""
     broken = tmp_path / "broken.yaml"
     broken.write_text("tile_size: 0.585\ntiles:\n  - [straight/N, stright/N]\nobjects: []\n")
     run_dir = tmp_path / "never"
-    result = run_command(f"run_dir={run_dir}", "total_frames=16", f"task_file={broken}")
+    result = run_command(f"run_dir={run_dir}", "total_frames=16", f"{key}={broken}")
     assert result.returncode == 2
     assert f"error: {broken}: tiles" in result.stderr and "stright" in result.stderr
     assert "Traceback" not in result.stderr
