@@ -91,8 +91,12 @@ def parse(argv: Sequence[str]) -> EvaluateConfig:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if {"-h", "--help"} & set(argv):
+        print(__doc__)
+        return 0
     try:
-        config = parse(sys.argv[1:] if argv is None else argv)
+        config = parse(argv)
         torch.set_num_threads(config.threads)
         documents = []
         for run_dir in config.run_dirs():

@@ -168,3 +168,10 @@ def test_teacher_reference_passes_obstacles():
                                 avoid_obstacles=True)
     assert teacher["source"]["algo"] == "teacher"
     assert teacher["summary"]["J_coll"] == 0.0
+
+
+def test_help_prints_the_usage(capsys):
+    from crllk import evaluate
+
+    assert evaluate.main(["--help"]) == 0
+    assert "python -m crllk.evaluate run=" in capsys.readouterr().out
