@@ -1,4 +1,5 @@
-"""``python -m crllk.record``: record episodes of a trained run or of the scripted follower.
+"""``python -m crllk.record``: record episodes of the scripted lane follower with rerun
+(a trained run's episodes: ``python -m crllk.evaluate run=DIR record=true``).
 
     python -m crllk.record --task obstacle_loop --episodes 1 --out rec.rrd [--viewer spawn]
 """
@@ -11,15 +12,11 @@ import time
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 from crllk.cli import Parser, fail, positive_int
 from crllk.errors import ConfigError
 from crllk.recording.recorder import VIEWERS, RecordingReport, record_episodes
 from crllk.tasks.follower import FollowerPolicy
-
-if TYPE_CHECKING:
-    pass
 
 
 @contextmanager
