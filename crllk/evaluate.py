@@ -23,19 +23,19 @@ from __future__ import annotations
 
 import json
 import sys
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import torch
-from omegaconf import OmegaConf
-from omegaconf.errors import OmegaConfBaseException
 
 from crllk.errors import ConfigError
-from crllk.evaluation.report import DEFAULT_SEED, aggregate, format_aggregate, format_summary
+from crllk.evaluation.report import aggregate, format_aggregate, format_summary
 from crllk.evaluation.runs import evaluate_follower, evaluate_run, record_run
 from crllk.files import atomic_write_text
+from crllk.settings import at_least_one, non_negative, one_of, parse_dotlist, setting
+from crllk.training.config import EVALUATION_SEED, algo_thresholds
 
 SOURCE = "evaluate"
 @dataclass
@@ -43,24 +43,42 @@ class EvaluateConfig:
     """Command-line settings (``key=value``)."""
 
     run: str | None = None
+    """A run directory to evaluate."""
     runs: list[str] = field(default_factory=list)
+    """Several run directories (``'runs=[a,b]'``), also summarised as mean ± std."""
     follower: bool = False
+    """Evaluate the scripted lane follower on ``task``."""
     teacher: bool = False
+    """Evaluate the privileged teacher (the follower, swerving around obstacles) on ``task``."""
     task: str = "small_loop"
-    episodes: int = 100
+    """The follower's and teacher's task: a name or the path of a task or map file."""
+    episodes: int = setting(100, check=at_least_one)
     deterministic: bool = False
-    seed: int | None = None
-    num_envs: int = 10
-    threads: int = 1
+    """The policy's mode instead of sampled actions."""
+    seed: int | None = setting(None, check=non_negative)
+    """Spawn and sampling seed (default: the run's ``eval.seed``)."""
+    num_envs: int = setting(10, check=at_least_one)
+    """Episode k runs in simulation k mod num_envs."""
+    threads: int = setting(1, check=at_least_one)
     out: str | None = None
+    """Also write every result (and the aggregate) to this JSON file."""
     record: bool = False
-    record_episodes: int = 1
-    viewer: str = "none"
-    lane_threshold: float = 0.5
-    collision_threshold: float = 0.02
+    """Record ``record_episodes`` episodes of each run to ``<run>/recordings/eval.rrd``."""
+    record_episodes: int = setting(1, check=at_least_one)
+    viewer: str = setting("none", check=one_of("none", "spawn", "serve"))
+    thresholds: dict[str, float] = field(default_factory=algo_thresholds)
+    """The follower's and teacher's constraint thresholds (``thresholds.lane=0.75``); a run
+    is judged by its own ``algo.constraints``."""
 
     def run_dirs(self) -> list[Path]:
         return [Path(r) for r in ([self.run] if self.run else []) + list(self.runs)]
+
+    def problems(self) -> Iterator[tuple[str, str]]:
+        if not self.run_dirs() and not self.follower and not self.teacher:
+            yield "run", "give run=<run_dir>, runs=[...], follower=true or teacher=true"
+        for run_dir in self.run_dirs():
+            if not run_dir.is_dir():
+                yield "run", f"no such run directory: {run_dir}"
 
 
 # ----- one evaluation ----------------------------------------------------------------------
@@ -68,26 +86,7 @@ class EvaluateConfig:
 # ----- command line ------------------------------------------------------------------------
 def parse(argv: Sequence[str]) -> EvaluateConfig:
     """``key=value`` arguments checked against :class:`EvaluateConfig`."""
-    schema = OmegaConf.structured(EvaluateConfig)
-    try:
-        merged = OmegaConf.merge(schema, OmegaConf.from_dotlist(list(argv)))
-        config: EvaluateConfig = OmegaConf.to_object(merged)  # type: ignore[assignment]
-    except OmegaConfBaseException as err:
-        key = getattr(err, "full_key", None) or "<arguments>"
-        raise ConfigError(SOURCE, str(key), str(err).splitlines()[0]) from None
-    if config.viewer not in ("none", "spawn", "serve"):
-        raise ConfigError(SOURCE, "viewer", f"must be one of none, spawn, serve, got "
-                          f"{config.viewer!r}")
-    for key in ("episodes", "num_envs", "threads", "record_episodes"):
-        if getattr(config, key) < 1:
-            raise ConfigError(SOURCE, key, f"must be >= 1, got {getattr(config, key)}")
-    if not config.run_dirs() and not config.follower and not config.teacher:
-        raise ConfigError(SOURCE, "run", "give run=<run_dir>, runs=[...], follower=true or "
-                          "teacher=true")
-    for run_dir in config.run_dirs():
-        if not run_dir.is_dir():
-            raise ConfigError(SOURCE, "run", f"no such run directory: {run_dir}")
-    return config
+    return parse_dotlist(EvaluateConfig, argv, SOURCE)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -111,13 +110,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         if len(documents) > 1:
             output["aggregate"] = aggregate(documents)
             print(format_aggregate(output["aggregate"]), flush=True)
-        thresholds = {"lane": config.lane_threshold, "collision": config.collision_threshold}
         for name in ("follower", "teacher"):
             if getattr(config, name):
                 output[name] = evaluate_follower(
                     config.task, episodes=config.episodes, num_envs=config.num_envs,
-                    seed=DEFAULT_SEED if config.seed is None else config.seed,
-                    thresholds=thresholds, avoid_obstacles=name == "teacher")
+                    seed=EVALUATION_SEED if config.seed is None else config.seed,
+                    thresholds=config.thresholds, avoid_obstacles=name == "teacher")
                 print(format_summary(output[name]), flush=True)
         if config.out:
             output["runs"] = documents

@@ -32,13 +32,14 @@ from typing import Any
 
 import torch
 
-from crllk.evaluation.report import DEFAULT_SEED, PAPER_CONSTRAINTS, aggregate
+from crllk.evaluation.report import PAPER_CONSTRAINTS, aggregate
 from crllk.evaluation.runs import evaluate_follower
 from crllk.files import atomic_write_text
+from crllk.training.config import EVALUATION_SEED, algo_thresholds
 from crllk.training.runs import CHECKPOINT_FILE, EVAL_FILE, read_eval_json
 
-THRESHOLDS = {"lane": 0.5, "collision": 0.02}
-"""alpha_1 (dm) and alpha_2 (collisions per episode) of the paper's Table 1."""
+THRESHOLDS = {c["name"]: algo_thresholds()[c["name"]] for c in PAPER_CONSTRAINTS}
+"""alpha_1 (dm) and alpha_2 (collisions per episode) of the paper's Table 1: ``algo=crllk``'s."""
 AGENTS = {
     "CRLLK-D": ("algo=crllk", "action=discrete"),
     "PPO-D": ("algo=ppo", "action=discrete"),
@@ -106,7 +107,7 @@ class Settings:
     jobs: int = 2
     runs_root: Path = Path("results/runs")
     results: Path = Path("results")
-    eval_seed: int = DEFAULT_SEED
+    eval_seed: int = EVALUATION_SEED
     command: str = ""
     train_overrides: tuple[str, ...] = ()
     agents: tuple[str, ...] = tuple(AGENTS)

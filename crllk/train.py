@@ -1,38 +1,28 @@
 """``python -m crllk.train task=<name>``: Lagrangian PPO (CRLLK) or fixed-weight PPO on a task.
 
-Hydra composes the configuration (``crllk/conf``; every ``tasks/<name>.yaml`` is a choice of
-the ``task`` group), :func:`resolve_config` checks it (a resumed run keeps its saved settings)
-and :func:`crllk.training.loop.train` trains; bad input ends with one line and exit status 2.
+Hydra composes the configuration (:mod:`crllk.training.compose`: the schema
+:class:`~crllk.training.config.TrainConfig`, the groups in ``crllk/conf``, and every
+``tasks/<name>.yaml`` as a choice of the ``task`` group), :func:`resolve_config` checks it
+(a resumed run keeps its saved settings) and :func:`crllk.training.loop.train` trains; bad
+input ends with one line and exit status 2.
 """
 
 from __future__ import annotations
 
 import sys
-from collections.abc import Iterable
 
 import hydra
-from hydra.core.config_store import ConfigStore
 from omegaconf import DictConfig, OmegaConf
 
 import crllk  # noqa: F401  (chooses the headless GL backend before torchrl imports mujoco)
 from crllk.errors import ConfigError
-from crllk.files import read_yaml
-from crllk.paths import task_file, task_names
+from crllk.training.compose import compose_config, register, task_paths_as_task_file
 from crllk.training.config import TrainConfig, upgrade, validate
 from crllk.training.loop import train
 
 RESUME_KEEPS = ("total_frames", "progress", "threads", "checkpoint_every", "record_every",
                 "viewer", "live", "live_port")
 """Settings a resumed run takes from the command line; all others come from its config.yaml."""
-
-
-def register_tasks(store: ConfigStore, names: Iterable[str] | None = None) -> None:
-    """Makes every ``tasks/<name>.yaml`` a choice of the ``task`` group (``task=<name>``)."""
-    for name in task_names() if names is None else names:
-        data = read_yaml(task_file(name))
-        node = dict(data) if isinstance(data, dict) else {}
-        node.setdefault("name", name)
-        store.store(group="task", name=name, node=node)
 
 
 def resolve_config(cfg: DictConfig) -> TrainConfig:
@@ -50,7 +40,7 @@ def resolve_config(cfg: DictConfig) -> TrainConfig:
     return config
 
 
-register_tasks(ConfigStore.instance())
+register()
 
 
 @hydra.main(version_base="1.3", config_path="conf", config_name="train")
@@ -62,17 +52,19 @@ def main(cfg: DictConfig) -> None:
         raise SystemExit(2) from None
 
 
-def task_paths_as_task_file(argv: list[str]) -> list[str]:
-    """``task=PATH`` (a ``.yaml`` task or Duckietown map file) becomes ``task_file=PATH``, so
-    that ``task=`` takes a name or a path, as in the other commands."""
-    out = []
-    for arg in argv:
-        key, sep, value = arg.partition("=")
-        out.append(f"task_file={value}" if sep and key == "task"
-                   and value.endswith((".yaml", ".yml")) else arg)
-    return out
+def check_overrides(argv: list[str]) -> None:
+    """Composes a plain command line (no ``--`` options) once before Hydra does, so that an
+    unknown setting or choice ends with one line and exit status 2, not Hydra's report."""
+    if any(arg.startswith("-") for arg in argv):
+        return
+    try:
+        compose_config(argv)
+    except ConfigError as err:
+        print(f"error: {err}", file=sys.stderr)
+        raise SystemExit(2) from None
 
 
 if __name__ == "__main__":
     sys.argv = [sys.argv[0], *task_paths_as_task_file(sys.argv[1:])]
+    check_overrides(sys.argv[1:])
     main()

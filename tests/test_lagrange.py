@@ -8,7 +8,12 @@ import math
 import pytest
 import torch
 
-from crllk.rl.lagrange import LagrangeMultiplier, PIDLagrangeMultiplier, make_multiplier
+from crllk.rl.lagrange import (
+    LagrangeMultiplier,
+    PIDLagrangeMultiplier,
+    make_multiplier,
+    multiplier_from_state,
+)
 
 
 def _dual(**overrides: object) -> LagrangeMultiplier:
@@ -85,8 +90,7 @@ def test_frozen_stays_fixed(factory):
 def test_dual_state_round_trips():
     source = _dual(initial=0.2, schedule="batch")
     source.update([1.5, 2.5])  # 0.2 + 0.1·(2.0 − 0.5) = 0.35
-    target = _dual(threshold=3.0, step_size=5.0)
-    target.load_state_dict(copy.deepcopy(source.state_dict()))
+    target = LagrangeMultiplier.from_state_dict(copy.deepcopy(source.state_dict()))
     assert target.state_dict() == source.state_dict()
     assert target.value == pytest.approx(0.35)
     # both continue identically: 0.35 + 0.1·(1.0 − 0.5) = 0.40
@@ -98,8 +102,7 @@ def test_pid_state_round_trips_including_internals():
     source.update([1.0, 2.0, 0.7])
     state = source.state_dict()
     assert {"integral", "smoothed_violation", "smoothed_estimate"} <= set(state["state"])
-    target = _pid()
-    target.load_state_dict(copy.deepcopy(state))
+    target = multiplier_from_state(copy.deepcopy(state))
     assert target.state_dict() == state
     assert target.integral == source.integral
     assert target.smoothed_estimate == source.smoothed_estimate
@@ -109,7 +112,9 @@ def test_pid_state_round_trips_including_internals():
 
 def test_loading_another_kind_raises():
     with pytest.raises(ValueError, match="'pid'"):
-        _dual().load_state_dict(_pid().state_dict())
+        LagrangeMultiplier.from_state_dict(_pid().state_dict())
+    with pytest.raises(ValueError, match="unknown multiplier kind 'lbfgs'"):
+        multiplier_from_state({**_pid().state_dict(), "kind": "lbfgs"})
 
 
 # ---------------------------------------------------------------------------------------- PID

@@ -316,7 +316,7 @@ def test_gae_helper_feeds_the_loss_with_renamed_keys():
     actor, critic, cost_critics = _networks()
     loss = LagrangianPPOLoss(actor, critic, cost_critics, lagrange=(1.0, 1.0))
     loss.set_keys(advantage_lane="adv_lane", value_target_collision="ret_collision")
-    modules = make_advantage_modules(0.95, 0.95, critic, cost_critics, keys=loss.tensor_keys)
+    modules = make_advantage_modules(0.95, 0.95, critic, cost_critics, loss=loss)
     g = torch.Generator().manual_seed(3)
     shape = (2, 5)  # two environments, five steps
     end = torch.zeros(*shape, 1, dtype=torch.bool)

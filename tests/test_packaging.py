@@ -10,6 +10,7 @@ import sys
 from pathlib import Path
 
 import crllk
+from crllk.training.compose import compose_config
 from crllk.training.config import validate
 
 REPO = Path(__file__).resolve().parents[1]
@@ -44,9 +45,9 @@ def test_an_installed_wheel_loads_every_task_from_any_directory(tmp_path):
 
 def test_default_run_directories_go_under_the_current_directory(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
-    config = validate({"task": {"name": "zigzag"}})
+    config = validate(compose_config(["task=zigzag"]))
     assert config.resolved_run_dir() == tmp_path / "runs" / "zigzag" / \
-        "crllk-discrete-state-seed0"
+        "crllk-discrete-pixels-seed0"
     assert not str(config.resolved_run_dir()).startswith(str(Path(crllk.__file__).parent))
 
 

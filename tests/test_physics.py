@@ -19,9 +19,7 @@ from crllk.tasks.actions import (
     MAX_DUTY_DIFFERENCE,
     MAX_MEAN_DUTY,
     MIN_MEAN_DUTY,
-    discrete_to_duty,
-    drive_turn_to_duty,
-    velocity_steering_to_duty,
+    action_duty,
 )
 from crllk.tasks.config import MotorConfig
 
@@ -305,14 +303,14 @@ def test_divergence_ends_the_episode_as_unstable():
 
 def test_velocity_to_duty_inverse_kinematics():
     """u = v / (R k) = 0.5 / (0.0318 * 27) on both wheels when steering is 0."""
-    duty = velocity_steering_to_duty((0.5, 0.0))
+    duty = action_duty("duckietown", (0.5, 0.0))
     np.testing.assert_allclose(duty, [0.5 / (0.0318 * 27)] * 2, rtol=1e-9)
     np.testing.assert_allclose(duty, [0.5824, 0.5824], atol=1e-4)
 
 
 def test_steering_splits_the_wheels():
     """Steering a adds +-a b / 2 / (R k) to the right / left duty."""
-    left, right = velocity_steering_to_duty((0.3, 0.5))
+    left, right = action_duty("duckietown", (0.3, 0.5))
     delta = 0.5 * 0.5 * 0.102 / (0.0318 * 27)
     assert right == pytest.approx(0.3 / (0.0318 * 27) + delta)
     assert left == pytest.approx(0.3 / (0.0318 * 27) - delta)
@@ -327,19 +325,19 @@ def test_steering_splits_the_wheels():
 ])
 def test_velocity_to_duty_saturates(action, expected):
     """Duties are clipped to [-1, 1] (and inputs to the action box first)."""
-    duty = velocity_steering_to_duty(action)
+    duty = action_duty("duckietown", action)
     np.testing.assert_allclose(duty, expected, atol=1e-4)
     assert np.all(np.abs(duty) <= 1.0)
 
 
 def test_positive_steering_turns_left(physics_for):
     """Positive steering drives the right wheel faster, and the robot yaws counter-clockwise."""
-    duty = velocity_steering_to_duty((0.2, 1.0))
+    duty = action_duty("duckietown", (0.2, 1.0))
     assert duty[1] > duty[0]
     physics = physics_for()
     _, yaw_rate = settle(physics, duty, seconds=1.0)
     assert yaw_rate > 0.1
-    _, yaw_rate = settle(physics, velocity_steering_to_duty((0.2, -1.0)), seconds=1.0)
+    _, yaw_rate = settle(physics, action_duty("duckietown", (0.2, -1.0)), seconds=1.0)
     assert yaw_rate < -0.1
 
 
@@ -354,51 +352,50 @@ def test_positive_steering_turns_left(physics_for):
 def test_continuous_drive_and_turn(action, expected):
     """velocity sets the mean duty in [0.1, 0.6]; steering the difference up to 0.5."""
     assert (MIN_MEAN_DUTY, MAX_MEAN_DUTY, MAX_DUTY_DIFFERENCE) == (0.1, 0.6, 0.5)
-    np.testing.assert_allclose(drive_turn_to_duty(action), expected, atol=1e-12)
+    np.testing.assert_allclose(action_duty("continuous", action), expected, atol=1e-12)
 
 
 def test_continuous_cannot_stand_still_by_dithering(physics_for):
     """Alternating velocity +1 and -1 every step still drives forward (the mean duty of both
     is positive), unlike the Duckietown mapping, where it stands still."""
-    for mapping, moves in ((drive_turn_to_duty, True), (velocity_steering_to_duty, False)):
+    for action_type, moves in (("continuous", True), ("duckietown", False)):
         physics = physics_for()
         x0, y0, _ = physics.pose()
         for k in range(60):
-            physics.set_wheel_duty(tuple(mapping((1.0 if k % 2 else -1.0, 0.0))))
+            physics.set_wheel_duty(action_duty(action_type, (1.0 if k % 2 else -1.0, 0.0)))
             physics.step(SUBSTEPS)
         x, y, _ = physics.pose()
-        assert (math.hypot(x - x0, y - y0) > 0.2) == moves, mapping.__name__
+        assert (math.hypot(x - x0, y - y0) > 0.2) == moves, action_type
 
 
 def test_continuous_reaches_the_discrete_turn_rates(physics_for):
     """Full steering yaws faster than a discrete turn (1.35 rad/s) at any velocity; the
     Duckietown mapping stays below 0.5 rad/s."""
     physics = physics_for()
-    _, discrete_rate = settle(physics, discrete_to_duty(0), seconds=1.5)
+    _, discrete_rate = settle(physics, action_duty("discrete", 0), seconds=1.5)
     for velocity in (-1.0, 0.0, 1.0):
-        _, rate = settle(physics_for(), drive_turn_to_duty((velocity, 1.0)), seconds=1.5)
+        _, rate = settle(physics_for(), action_duty("continuous", (velocity, 1.0)), seconds=1.5)
         assert rate > discrete_rate > 1.2, velocity
-    _, rate = settle(physics_for(), velocity_steering_to_duty((0.2, 1.0)), seconds=1.5)
+    _, rate = settle(physics_for(), action_duty("duckietown", (0.2, 1.0)), seconds=1.5)
     assert 0.1 < rate < 0.5
 
 
 def test_discrete_action_table():
     """0 turns left (0.04, 0.4), 1 turns right (0.4, 0.04), 2 goes straight (0.3, 0.3)."""
-    np.testing.assert_array_equal(discrete_to_duty(0), [0.04, 0.4])
-    np.testing.assert_array_equal(discrete_to_duty(1), [0.4, 0.04])
-    np.testing.assert_array_equal(discrete_to_duty(np.int64(2)), [0.3, 0.3])
+    np.testing.assert_array_equal(action_duty("discrete", 0), [0.04, 0.4])
+    np.testing.assert_array_equal(action_duty("discrete", 1), [0.4, 0.04])
+    np.testing.assert_array_equal(action_duty("discrete", np.int64(2)), [0.3, 0.3])
 
 
-def test_discrete_duty_is_a_copy():
-    """Changing a returned duty does not change the action table."""
-    duty = discrete_to_duty(2)
-    duty[:] = 9.0
-    np.testing.assert_array_equal(DISCRETE_DUTIES[2], [0.3, 0.3])
-    np.testing.assert_array_equal(discrete_to_duty(2), [0.3, 0.3])
+def test_discrete_duty_cannot_change_the_action_table():
+    """A returned duty is an immutable pair, equal to the table's row."""
+    duty = action_duty("discrete", 2)
+    assert isinstance(duty, tuple)
+    np.testing.assert_array_equal(DISCRETE_DUTIES[2], duty)
 
 
 @pytest.mark.parametrize("action", [-1, 3, 10])
 def test_discrete_action_out_of_range(action):
     """Actions other than 0, 1, 2 raise a ValueError naming the action."""
     with pytest.raises(ValueError, match=str(action)):
-        discrete_to_duty(action)
+        action_duty("discrete", action)

@@ -4,21 +4,15 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from hydra import compose, initialize_config_module
-
 import crllk  # noqa: F401  (headless GL before torchrl)
 from crllk.train import resolve_config
+from crllk.training.compose import compose_config
 from crllk.training.loop import train
 
 NUM_ENVS, ROLLOUT = 2, 8
 FRAMES_PER_ITERATION = NUM_ENVS * ROLLOUT
 TINY = [f"num_envs={NUM_ENVS}", f"rollout_steps={ROLLOUT}", "ppo.minibatch_size=8",
         "ppo.epochs=2", "task.horizon=12", "progress=false", "checkpoint_every=1"]
-
-
-def compose_config(overrides: list[str]):
-    with initialize_config_module(config_module="crllk.conf", version_base="1.3"):
-        return compose(config_name="train", overrides=overrides)
 
 
 def run_in_process(run_dir: Path, iterations: int, extra: list[str] = (), *,

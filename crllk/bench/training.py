@@ -11,11 +11,10 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from hydra import compose, initialize_config_module
-
 import crllk  # noqa: F401  (headless GL before torchrl)
 from crllk.envs.episodes import EpisodeAccumulator
 from crllk.training.build import build_run
+from crllk.training.compose import compose_config
 from crllk.training.config import TrainConfig, validate
 from crllk.training.loop import learn
 
@@ -34,8 +33,7 @@ class TrainingRates:
 
 def bench_config(overrides: Sequence[str] = ()) -> TrainConfig:
     """The trainer's default configuration with Hydra-style ``overrides``."""
-    with initialize_config_module(config_module="crllk.conf", version_base="1.3"):
-        return validate(compose(config_name="train", overrides=list(overrides)))
+    return validate(compose_config(overrides))
 
 
 def training_rates(config: TrainConfig, iterations: int = 5) -> TrainingRates:

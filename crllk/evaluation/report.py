@@ -13,10 +13,6 @@ from crllk.envs.episodes import summarise
 from crllk.rl.rollout import EvaluationResult
 from crllk.tasks.actions import DISCRETE_NAMES
 
-DEFAULT_SEED = 1_000_000
-"""Spawn seed of evaluations without a run (the follower), as ``eval.seed`` of training."""
-
-
 CONTINUOUS_BINS = np.linspace(-1.0, 1.0, 11)
 """Edges of the continuous action histogram (velocity and steering lie in [-1, 1])."""
 

@@ -8,11 +8,12 @@ from pathlib import Path
 from typing import Any
 
 from crllk.envs.batched import make_env
-from crllk.evaluation.report import DEFAULT_SEED, result_document
+from crllk.evaluation.report import result_document
 from crllk.files import atomic_write_text
 from crllk.rl.rollout import run_episodes
 from crllk.tasks.follower import FollowerPolicy
 from crllk.training.build import build_env
+from crllk.training.config import EVALUATION_SEED, algo_thresholds
 from crllk.training.runs import EVAL_FILE, load_actor, load_run_config
 
 
@@ -42,7 +43,7 @@ def evaluate_run(run_dir: str | Path, *, episodes: int, deterministic: bool = Fa
     return document
 
 
-def evaluate_follower(task: str | Path, *, episodes: int, seed: int = DEFAULT_SEED,
+def evaluate_follower(task: str | Path, *, episodes: int, seed: int = EVALUATION_SEED,
                       num_envs: int = 10, thresholds: dict[str, float] | None = None,
                       avoid_obstacles: bool = False) -> dict[str, Any]:
     """The scripted lane follower through the same episodes and metrics as a run; with
@@ -55,7 +56,7 @@ def evaluate_follower(task: str | Path, *, episodes: int, seed: int = DEFAULT_SE
         env.close()
     objects = env.config.map.objects
     return result_document(
-        result, "duty", thresholds=thresholds or {"lane": 0.5, "collision": 0.02},
+        result, "duty", thresholds=thresholds or algo_thresholds(),
         settings={"episodes": episodes, "seed": seed, "num_envs": num_envs,
                   "deterministic": True},
         source={"task": str(task), "algo": "teacher" if avoid_obstacles else "follower",

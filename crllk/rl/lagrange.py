@@ -4,7 +4,7 @@ A multiplier knows only its threshold α, its own update rule and its state; it 
 networks, losses or loggers. The training loop feeds it cost estimates Ĵ_C (one per finished
 episode) and reads back ``value``; the loss receives that value.
 
-Two rules share one interface (``value``, ``update``, ``state_dict``, ``load_state_dict``):
+Two rules share one interface (``value``, ``update``, ``state_dict``, ``from_state_dict``):
 
 * :class:`LagrangeMultiplier`, projected dual ascent::
 
@@ -22,7 +22,7 @@ from __future__ import annotations
 import abc
 import math
 from collections.abc import Mapping, Sequence
-from typing import Any, ClassVar, Literal
+from typing import Any, ClassVar, Literal, Self
 
 Schedule = Literal["episode", "batch"]
 MultiplierKind = Literal["dual", "pid"]
@@ -139,27 +139,32 @@ class _Multiplier(abc.ABC):
         """Everything needed to resume: kind, configuration and internal state (plain Python)."""
         return {"kind": self.kind, "config": self._config(), "state": self._internals()}
 
-    def load_state_dict(self, state_dict: Mapping[str, Any]) -> None:
-        """Restores configuration and state saved by :meth:`state_dict` of the same kind.
+    @classmethod
+    def from_state_dict(cls, state_dict: Mapping[str, Any]) -> Self:
+        """The multiplier saved by :meth:`state_dict`: its configuration and state.
 
         Raises:
             ValueError: if the state comes from another kind of multiplier or is invalid.
         """
-        if state_dict.get("kind") != self.kind:
+        if state_dict.get("kind") != cls.kind:
             raise ValueError(
-                f"cannot load a {state_dict.get('kind')!r} multiplier state into {self.kind!r}"
+                f"cannot load a {state_dict.get('kind')!r} multiplier state into {cls.kind!r}"
             )
-        restored = type(self)(**state_dict["config"])  # validates the configuration
+        multiplier = cls(**state_dict["config"])  # validates the configuration
         internals = dict(state_dict["state"])
-        unknown = set(internals) - set(restored._internals())
+        unknown = set(internals) - set(multiplier._internals())
         if unknown:
             raise ValueError(f"unknown multiplier state entries {sorted(unknown)}")
-        restored._value = float(internals.pop("value", restored._value))
-        for name, value in internals.items():
-            setattr(restored, name, value)
-        if not 0.0 <= restored._value <= restored.max_value:
-            raise ValueError(f"value must lie in [0, {restored.max_value}], got {restored._value}")
-        self.__dict__.update(restored.__dict__)
+        multiplier._restore(internals)
+        if not 0.0 <= multiplier._value <= multiplier.max_value:
+            raise ValueError(f"value must lie in [0, {multiplier.max_value}], got "
+                             f"{multiplier._value}")
+        return multiplier
+
+    def _restore(self, internals: Mapping[str, Any]) -> None:
+        """Sets the entries of :meth:`_internals` that ``internals`` holds."""
+        self._value = float(internals.get("value", self._value))
+        self.num_updates = int(internals.get("num_updates", self.num_updates))
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}(value={self._value:.6g}, threshold={self.threshold:.6g})"
@@ -298,6 +303,12 @@ class PIDLagrangeMultiplier(_Multiplier):
             "smoothed_estimate": self.smoothed_estimate,
         }
 
+    def _restore(self, internals: Mapping[str, Any]) -> None:
+        super()._restore(internals)
+        self.integral = float(internals.get("integral", self.integral))
+        self.smoothed_violation = internals.get("smoothed_violation", self.smoothed_violation)
+        self.smoothed_estimate = internals.get("smoothed_estimate", self.smoothed_estimate)
+
 
 Multiplier = LagrangeMultiplier | PIDLagrangeMultiplier
 
@@ -323,3 +334,11 @@ def make_multiplier(kind: MultiplierKind, **kwargs: Any) -> Multiplier:
         return _KINDS[kind](**kwargs)  # type: ignore[return-value]
     except TypeError as err:  # missing or unexpected keyword: report it as a config error
         raise ValueError(f"bad arguments for a {kind!r} multiplier: {err}") from err
+
+
+def multiplier_from_state(state_dict: Mapping[str, Any]) -> Multiplier:
+    """The multiplier saved by ``state_dict()``, of the kind it names."""
+    kind = state_dict.get("kind")
+    if kind not in _KINDS:
+        raise ValueError(f"unknown multiplier kind {kind!r}; expected one of {sorted(_KINDS)}")
+    return _KINDS[kind].from_state_dict(state_dict)  # type: ignore[return-value]

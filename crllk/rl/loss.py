@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field, make_dataclass
+from dataclasses import dataclass
 from typing import Any
 
 import torch
@@ -93,7 +93,7 @@ edge of the box (atanh of nearly ±1) would otherwise inflate the policy's noise
 
     @dataclass
     class _AcceptedKeys:
-        """Tensordict keys read by the loss; per-cost fields are added for each instance."""
+        """Tensordict keys read by the loss, apart from the per-cost ones (:meth:`cost_keys`)."""
 
         advantage: NestedKey = "advantage"
         value_target: NestedKey = "value_target"
@@ -148,19 +148,19 @@ edge of the box (atanh of nearly ±1) would otherwise inflate the policy's noise
     # ---------------------------------------------------------------- keys
 
     def _init_keys(self) -> None:
-        """Builds this instance's accepted keys: the fixed ones plus three per cost."""
-        fields = [
-            (name, NestedKey, field(default=default))
-            for cost in self.cost_names
-            for name, default in _cost_key_defaults(cost).items()
-        ]
-        keys_class = make_dataclass(
-            "_AcceptedKeys", fields, bases=(LagrangianPPOLoss._AcceptedKeys,)
-        )
-        self._AcceptedKeys = keys_class
-        self.default_keys = keys_class
-        self._tensor_keys = keys_class()
+        """The fixed keys (TorchRL's ``tensor_keys``) and three per cost, by field name."""
+        self._cost_tensor_keys: dict[str, NestedKey] = {
+            name: default for cost in self.cost_names
+            for name, default in _cost_key_defaults(cost).items()}
         self._take_keys_from_networks()
+
+    def set_keys(self, **kwargs: NestedKey) -> None:
+        """TorchRL's ``set_keys``, which also takes the per-cost fields ``advantage_<cost>``,
+        ``value_target_<cost>`` and ``value_<cost>``; an unknown field raises ValueError."""
+        for name in [k for k in kwargs if k in self._cost_tensor_keys]:
+            self._cost_tensor_keys[name] = kwargs.pop(name)
+        if kwargs:
+            super().set_keys(**kwargs)
 
     def _take_keys_from_networks(self) -> None:
         """Reads action, log-prob and value keys from the networks, as TorchRL's PPO does."""
@@ -174,7 +174,7 @@ edge of the box (atanh of nearly ±1) would otherwise inflate the policy's noise
             out_keys = getattr(critic, "out_keys", [])
             if len(out_keys) == 1:
                 self.set_keys(**{field_name: out_keys[0]})
-        value_keys = [getattr(self.tensor_keys, name) for name in critics]
+        value_keys = [self.tensor_keys.value, *(self.cost_keys(n)[2] for n in self.cost_names)]
         if len(set(value_keys)) != len(value_keys):
             raise ValueError(
                 f"every critic must write its own value key, got {value_keys}; e.g. "
@@ -186,12 +186,8 @@ edge of the box (atanh of nearly ±1) would otherwise inflate the policy's noise
 
     def cost_keys(self, name: str) -> tuple[NestedKey, NestedKey, NestedKey]:
         """(advantage, value target, value) keys of cost ``name``."""
-        keys = self.tensor_keys
-        return (
-            getattr(keys, f"advantage_{name}"),
-            getattr(keys, f"value_target_{name}"),
-            getattr(keys, f"value_{name}"),
-        )
+        keys = self._cost_tensor_keys
+        return keys[f"advantage_{name}"], keys[f"value_target_{name}"], keys[f"value_{name}"]
 
     @property
     def in_keys(self) -> list[NestedKey]:
@@ -408,7 +404,7 @@ def make_advantage_modules(
     critic_network: TensorDictModule,
     cost_critics: Mapping[str, TensorDictModule],
     *,
-    keys: LagrangianPPOLoss._AcceptedKeys | None = None,
+    loss: LagrangianPPOLoss | None = None,
     average_gae: bool = False,
 ) -> AdvantageModules:
     """GAE(γ, λ_GAE) for the reward and for each cost, writing the keys the loss reads.
@@ -423,13 +419,15 @@ def make_advantage_modules(
         lmbda: GAE λ.
         critic_network: Reward critic.
         cost_critics: Cost critics by name, as given to the loss.
-        keys: The loss's ``tensor_keys`` (so that renamed keys agree); defaults as the loss's.
+        loss: The loss the advantages are for, so that renamed keys agree (default: the
+            loss's default keys).
         average_gae: Standardise each advantage (leave ``False`` to combine them unscaled).
     """
     if not (0.0 <= gamma <= 1.0 and 0.0 <= lmbda <= 1.0) or math.isnan(gamma + lmbda):
         raise ValueError(f"gamma and lmbda must lie in [0, 1], got {gamma}, {lmbda}")
     names = _check_cost_names(tuple(cost_critics))
     reward = GAE(gamma=gamma, lmbda=lmbda, value_network=critic_network, average_gae=average_gae)
+    keys = None if loss is None else loss.tensor_keys
     reward.set_keys(
         value=critic_network.out_keys[0] if keys is None else keys.value,
         advantage="advantage" if keys is None else keys.advantage,
@@ -438,11 +436,11 @@ def make_advantage_modules(
     costs = {}
     for name in names:
         critic = cost_critics[name]
-        if keys is None:
+        if loss is None:
             advantage, target = f"advantage_{name}", f"value_target_{name}"
             value = critic.out_keys[0]
         else:
-            advantage, target, value = (getattr(keys, f) for f in _cost_key_defaults(name))
+            advantage, target, value = loss.cost_keys(name)
         module = GAE(gamma=gamma, lmbda=lmbda, value_network=critic, average_gae=average_gae)
         module.set_keys(
             reward=cost_reward_key(name), value=value, advantage=advantage, value_target=target

@@ -28,11 +28,13 @@ from torch.distributions import Categorical
 from torchrl.data import TensorSpec
 from torchrl.modules import ProbabilisticActor, TanhNormal, ValueOperator
 
+from crllk.settings import one_of, positive, setting
+
 PIXEL_SCALE = 1.0 / 255.0  # uint8 camera value -> [0, 1]
 ENCODERS = ("fast", "original", "mlp")
 
 
-@dataclass(frozen=True)
+@dataclass
 class ModelConfig:
     """Sizes of the networks.
 
@@ -51,12 +53,12 @@ class ModelConfig:
             still in flight through the motor delay), which a robot knows without sensing.
     """
 
-    encoder: str = "fast"
-    hidden: int = 64
-    feature_dim: int = 256
+    encoder: str = setting("fast", check=one_of("fast", "original"))
+    hidden: int = setting(64, check=positive)
+    feature_dim: int = setting(256, check=positive)
     initial_log_std: float = -0.5
     shared_critic: bool = False
-    critic_input: str = "observation"
+    critic_input: str = setting("observation", check=one_of("observation", "state"))
     policy_commands: bool = False
 
 

@@ -14,8 +14,8 @@ Action types:
   duty;
 - ``duty``: raw wheel duty cycles (left, right).
 
-The scalar functions return plain ``(left, right)`` tuples for the per-step hot path; the
-``*_to_duty`` functions wrap them for array callers.
+:func:`action_duty` maps any of them; every function returns a plain ``(left, right)`` tuple
+(the per-step hot path).
 """
 
 from __future__ import annotations
@@ -23,6 +23,12 @@ from __future__ import annotations
 import numpy as np
 
 from crllk.sim.constants import WHEEL_DISTANCE, WHEEL_RADIUS
+from crllk.sim.motor import clip_duty
+
+ACTIONS = ("discrete", "continuous", "duckietown", "duty")
+"""Action types: 3 discrete duty pairs; (velocity, steering) in [-1, 1]^2 as a drive and a
+turn, or through the Duckietown inverse kinematics, as the original; raw wheel duty cycles
+(left, right) in [-1, 1]."""
 
 _DISCRETE = ((0.04, 0.4), (0.4, 0.04), (0.3, 0.3))
 DISCRETE_DUTIES = np.array(_DISCRETE)
@@ -55,11 +61,6 @@ def discrete_duty(action: int) -> tuple[float, float]:
     return _DISCRETE[index]
 
 
-def discrete_to_duty(action: int) -> np.ndarray:
-    """:func:`discrete_duty` as a new array."""
-    return np.array(discrete_duty(action))
-
-
 def velocity_steering_duty(velocity: float, steering: float) -> tuple[float, float]:
     """Duckietown inverse kinematics: (velocity, steering) in [-1, 1]^2 to duty (left, right).
 
@@ -86,13 +87,16 @@ def drive_turn_duty(velocity: float, steering: float) -> tuple[float, float]:
     return mean - half_difference, mean + half_difference
 
 
-def drive_turn_to_duty(action: np.ndarray) -> np.ndarray:
-    """:func:`drive_turn_duty` of a (velocity, steering) pair, as an array."""
-    velocity, steering = np.asarray(action, dtype=np.float64).tolist()
-    return np.array(drive_turn_duty(velocity, steering))
-
-
-def velocity_steering_to_duty(action: np.ndarray) -> np.ndarray:
-    """:func:`velocity_steering_duty` of a (velocity, steering) pair, as an array."""
-    velocity, steering = np.asarray(action, dtype=np.float64).tolist()
-    return np.array(velocity_steering_duty(velocity, steering))
+def action_duty(action_type: str, action) -> tuple[float, float]:
+    """Wheel duty cycles (left, right) of a policy action of ``action_type``
+    (:data:`ACTIONS`): an index for ``discrete``, a pair for the others."""
+    if action_type == "discrete":
+        return discrete_duty(action if type(action) is int else np.asarray(action).item())
+    pair = np.asarray(action, dtype=np.float64).reshape(2).tolist()
+    if action_type == "continuous":
+        return drive_turn_duty(*pair)
+    if action_type == "duckietown":
+        return velocity_steering_duty(*pair)
+    if action_type == "duty":
+        return clip_duty(*pair)
+    raise ValueError(f"action must be one of {ACTIONS}, got {action_type!r}")

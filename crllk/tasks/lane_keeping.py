@@ -27,17 +27,12 @@ from crllk.maps.lanes import LANE_OFFSET
 from crllk.maps.markings import white_lateral
 from crllk.maps.obstacles import ObstacleIndex, footprint_points
 from crllk.sim import constants as C
-from crllk.sim.motor import clip_duty
 from crllk.sim.physics import Physics, check_points
-from crllk.tasks.actions import discrete_duty, drive_turn_duty, velocity_steering_duty
+from crllk.tasks.actions import ACTIONS, action_duty
 from crllk.tasks.config import TaskConfig, load_task_config
 from crllk.tasks.constraints import Constraint
 
 OBSERVATIONS = ("pixels", "state")
-ACTIONS = ("discrete", "continuous", "duckietown", "duty")
-"""Action types (:mod:`crllk.tasks.actions`): 3 discrete duty pairs; (velocity, steering) in
-[-1, 1]^2 as a forward drive and a turn; (velocity, steering) through the Duckietown inverse
-kinematics, as the original; raw wheel duty cycles (left, right) in [-1, 1]."""
 
 _CURVATURE_LOOKAHEAD = (0.15, 0.3, 0.6)
 """Distances ahead (m) at which the state observation reports lane curvature."""
@@ -223,23 +218,12 @@ class LaneKeeping(base.Task):
 
     # ----- stepping ---------------------------------------------------------------------
     def before_step(self, action, physics: Physics) -> None:
-        duty = self._duty(action)
+        duty = action_duty(self.action_type, action)
         if not (math.isfinite(duty[0]) and math.isfinite(duty[1])):
             raise ValueError(f"action {action!r} is not finite")
         self.episode.history = [duty, *self.episode.history[:-1]]
         self.episode.previous_pose = physics.pose()
         physics.set_wheel_duty(duty)
-
-    def _duty(self, action) -> tuple[float, float]:
-        """Wheel duty cycles (left, right) of a policy action."""
-        if self.action_type == "discrete":
-            return discrete_duty(action if type(action) is int else np.asarray(action).item())
-        pair = np.asarray(action, dtype=np.float64).reshape(2).tolist()
-        if self.action_type == "continuous":
-            return drive_turn_duty(*pair)
-        if self.action_type == "duckietown":
-            return velocity_steering_duty(*pair)
-        return clip_duty(*pair)
 
     def after_step(self, physics: Physics) -> None:
         x, y, yaw = physics.pose()

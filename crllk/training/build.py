@@ -12,7 +12,7 @@ from crllk.envs.batched import BatchedLaneKeepingEnv, make_env
 from crllk.errors import ConfigError
 from crllk.rl.lagrange import Multiplier, make_multiplier
 from crllk.rl.loss import AdvantageModules, LagrangianPPOLoss, make_advantage_modules
-from crllk.rl.models import ModelConfig, make_actor, make_critic, make_shared_critic
+from crllk.rl.models import make_actor, make_critic, make_shared_critic
 from crllk.tasks.constraints import Constraint
 from crllk.tasks.lane_keeping import state_feature_names
 from crllk.training.config import TrainConfig
@@ -49,7 +49,7 @@ def build_env(config: TrainConfig, *, num_envs: int, seed: int,
 def build_learner(config: TrainConfig, env: BatchedLaneKeepingEnv) -> Learner:
     obs = config.obs.name
     shape = env.observation_spec[obs].shape[1:]
-    model = ModelConfig(**vars(config.model))
+    model = config.model
     names = state_feature_names(env.config)
     commands_dim = env.observation_spec["commands"].shape[-1] if model.policy_commands else 0
     actor = make_actor(obs, shape, config.action.name, env.action_spec, model,
@@ -73,7 +73,7 @@ def build_learner(config: TrainConfig, env: BatchedLaneKeepingEnv) -> Learner:
                              critic_coeff=ppo.critic_coeff,
                              normalize_advantage=ppo.normalize_advantage)
     advantages = make_advantage_modules(ppo.gamma, ppo.gae_lambda, critics["reward"],
-                                        {c: critics[c] for c in costs}, keys=loss.tensor_keys)
+                                        {c: critics[c] for c in costs}, loss=loss)
     optimizer = torch.optim.Adam(loss.parameters(), lr=ppo.lr)
     return Learner(actor, critics, loss, advantages, optimizer)
 

@@ -13,7 +13,7 @@ from crllk.envs.batched import BatchedLaneKeepingEnv
 from crllk.envs.episodes import EpisodeAccumulator
 from crllk.errors import ConfigError
 from crllk.files import atomic_write
-from crllk.rl.lagrange import Multiplier
+from crllk.rl.lagrange import Multiplier, multiplier_from_state
 from crllk.training.build import Learner
 from crllk.training.config import TrainConfig
 
@@ -67,8 +67,8 @@ def restore(state: dict[str, Any], learner: Learner, multipliers: dict[str, Mult
     for name, critic in learner.critics.items():
         critic.load_state_dict(state["critics"][name])
     learner.optimizer.load_state_dict(state["optimizer"])
-    for name, multiplier in multipliers.items():
-        multiplier.load_state_dict(state["multipliers"][name])
+    for name in multipliers:
+        multipliers[name] = multiplier_from_state(state["multipliers"][name])
     learner.loss.set_multipliers({name: m.value for name, m in multipliers.items()})
     episodes.load_state_dict(state["episodes"])
     env.load_sim_state(state["env"])

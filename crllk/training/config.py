@@ -1,131 +1,210 @@
-"""The trainer's configuration: a typed schema over the Hydra config, checked before any work.
+"""The trainer's settings: every value's default, unit and range, in one place.
 
-The YAML files in ``crllk/conf`` hold the values and their comments; the dataclasses here hold
-the types and the ranges. :func:`validate` merges a composed Hydra config into the schema (a
-string where a number belongs fails there) and checks every range, raising a
+Hydra composes ``python -m crllk.train``'s configuration from :class:`TrainConfig` (registered
+as the schema ``train_schema``), then the groups in ``crllk/conf`` (``algo``, ``action``,
+``obs``: the values that differ between their choices), the task and the command line.
+:func:`validate` checks the result field by field (:mod:`crllk.settings`), raising a
 :class:`~crllk.errors.ConfigError` that names the field, e.g.
 ``override: algo.constraints.lane.threshold: must be >= 0, got -1.0``.
 """
 
 from __future__ import annotations
 
-import math
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from hydra.core.config_store import ConfigStore
 from omegaconf import DictConfig, OmegaConf
-from omegaconf.errors import OmegaConfBaseException
 
-from crllk.errors import ConfigError
+from crllk.rl.models import ModelConfig
+from crllk.settings import (
+    non_negative,
+    one_of,
+    open_unit_interval,
+    parse,
+    positive,
+    setting,
+    tcp_port,
+    unit_interval,
+)
 
 SOURCE = "override"
-"""How errors name where a bad value came from (the command line or the YAML defaults)."""
+"""How errors name where a bad value came from (the command line or the configuration)."""
+SCHEMA_NAME = "train_schema"
+"""The name under which :class:`TrainConfig` is stored in Hydra's ConfigStore."""
+CONF_DIR = Path(__file__).resolve().parent.parent / "conf"
+EVALUATION_SEED = 1_000_000
+"""Spawn (and sampling) seed of evaluations, far from every training seed."""
 
 
 @dataclass
 class ConstraintConfig:
     """The multiplier of one constraint (``algo.constraints.<name>``)."""
 
-    threshold: float = 0.0
-    initial: float = 0.0
-    step_size: float = 0.05
-    max_value: float = 100.0
-    kp: float = 0.0
-    kd: float = 0.0
+    threshold: float = setting(check=non_negative)
+    """alpha: the most the constraint's metric may be (in the constraint's unit)."""
+    initial: float = setting(0.0, check=non_negative)
+    """lambda at the start (with ``algo.frozen``: the fixed weight)."""
+    step_size: float = setting(0.05, check=positive)
+    """eta: the dual ascent step per update (PID: the integral gain)."""
+    max_value: float = setting(100.0, check=non_negative)
+    """lambda_max: the projection's upper bound."""
+    kp: float = setting(0.0, check=non_negative)
+    """PID only (``algo.multiplier=pid``): proportional gain."""
+    kd: float = setting(0.0, check=non_negative)
+    """PID only: derivative gain."""
+
+    def problems(self) -> Iterator[tuple[str, str]]:
+        if self.max_value < self.initial:
+            yield "max_value", (f"must be >= initial ({self.initial}), got {self.max_value}")
 
 
 @dataclass
 class AlgoConfig:
-    name: str = "crllk"
-    multiplier: str = "dual"
-    schedule: str = "batch"
+    """The learner (``algo=crllk``: learned multipliers; ``algo=ppo``: fixed weights)."""
+
+    name: str = setting(check=one_of("crllk", "ppo"))
+    multiplier: str = setting("dual", check=one_of("dual", "pid"))
+    """dual: projected dual ascent; pid: the PID Lagrangian (Stooke et al. 2020)."""
+    schedule: str = setting("batch", check=one_of("episode", "batch"))
+    """batch: one multiplier update per iteration on the mean of its finished episodes;
+    episode: one update per finished episode."""
     frozen: bool = False
+    """The multipliers stay at ``initial``: fixed reward weights."""
     constraints: dict[str, ConstraintConfig] = field(default_factory=dict)
     """Multiplier settings by constraint name; every constraint of the task needs one."""
 
 
 @dataclass
 class ActionConfig:
-    name: str = "discrete"
-    baseline_collision_weight: float = 4.0
+    """The action space (``action=discrete|continuous|duckietown``)."""
+
+    name: str = setting(check=one_of("discrete", "continuous", "duckietown"))
+    baseline_collision_weight: float = setting(check=non_negative)
+    """The fixed collision weight of the PPO baseline with this action space."""
 
 
 @dataclass
 class ObsConfig:
-    name: str = "state"
+    """What the policy reads (``obs=pixels|state``)."""
+
+    name: str = setting(check=one_of("state", "pixels"))
 
 
 @dataclass
 class PPOConfig:
-    gamma: float = 0.95
-    gae_lambda: float = 0.95
-    clip_epsilon: float = 0.2
-    epochs: int = 10
-    minibatch_size: int = 512
-    lr: float = 1e-3
+    gamma: float = setting(0.95, check=unit_interval)
+    """Discount (as the original)."""
+    gae_lambda: float = setting(0.95, check=unit_interval)
+    """GAE lambda (as the original)."""
+    clip_epsilon: float = setting(0.2, check=open_unit_interval)
+    epochs: int = setting(10, check=positive)
+    """Passes over each batch."""
+    minibatch_size: int = setting(512, check=positive)
+    """Transitions per gradient step."""
+    lr: float = setting(1e-3, check=positive)
+    """Adam learning rate."""
     anneal_lr: bool = True
-    lr_final_fraction: float = 0.0
-    max_grad_norm: float = 1.0
-    entropy_coeff: float = 0.01
-    critic_coeff: float = 0.5
+    """The learning rate falls linearly over ``total_frames`` (false: constant), so that the
+    policy a run ends with is not a noisy last iterate."""
+    lr_final_fraction: float = setting(0.0, check=unit_interval)
+    """With ``anneal_lr``: the rate falls to ``lr`` x this at the end."""
+    max_grad_norm: float = setting(1.0, check=positive)
+    """Gradient-norm clip."""
+    entropy_coeff: float = setting(0.01, check=non_negative)
+    critic_coeff: float = setting(0.5, check=non_negative)
     normalize_advantage: bool = True
-
-
-@dataclass
-class ModelSchema:
-    encoder: str = "fast"
-    hidden: int = 64
-    feature_dim: int = 256
-    initial_log_std: float = -0.5
-    shared_critic: bool = False
-    critic_input: str = "observation"
-    policy_commands: bool = False
+    """Standardise the combined advantage over each minibatch."""
 
 
 @dataclass
 class TeacherConfig:
-    coeff: float = 0.0
-    frames: int = 0
-    final: float = 0.0
+    """The privileged teacher (:mod:`crllk.tasks.teacher`: the scripted follower, swerving
+    around obstacles)."""
+
+    coeff: float = setting(1.0, check=non_negative)
+    """Weight of the imitation term -mean(log pi(a_teacher | s)) at the start (0: no teacher)."""
+    frames: int = setting(150_000, check=non_negative)
+    """The weight moves linearly to ``final`` over these frames ..."""
+    final: float = setting(0.3, check=non_negative)
+    """... and stays there (0: Lagrangian PPO alone after ``frames``)."""
 
 
 @dataclass
 class EvalConfig:
-    every: int = 100
-    episodes: int = 100
-    num_envs: int = 10
-    seed: int = 1_000_000
+    """The evaluations written to ``eval.csv`` during training."""
+
+    every: int = setting(100, check=non_negative)
+    """Iterations between evaluations, and one at the end (0: never)."""
+    episodes: int = setting(100, check=positive)
+    """Episodes of the sampled policy each time: the same as ``python -m crllk.evaluate``."""
+    num_envs: int = setting(10, check=positive)
+    """Episode k runs in simulation k mod num_envs, as ``crllk.evaluate``'s default."""
+    seed: int = setting(EVALUATION_SEED, check=non_negative)
+    """Spawn seed of the evaluation environment (apart from training seeds)."""
 
 
 @dataclass
 class TrainConfig:
+    """Everything ``python -m crllk.train`` reads; ``key=value`` on its command line."""
+
     task: dict[str, Any] = field(default_factory=dict)
+    """The task's settings (``tasks/<name>.yaml``); ``task.horizon=256`` changes one."""
     algo: AlgoConfig = field(default_factory=AlgoConfig)
     action: ActionConfig = field(default_factory=ActionConfig)
     obs: ObsConfig = field(default_factory=ObsConfig)
-    seed: int = 0
-    total_frames: int = 300_000
+    seed: int = setting(0, check=non_negative)
+    total_frames: int = setting(500_000, check=positive)
+    """Environment steps (summed over sub-environments) to train for (``obs=state``: 300,000)."""
     run_dir: str | None = None
+    """Default: ``runs/<task>/<algo>-<action>-<obs>-seed<seed>`` under the current directory."""
     resume: bool = False
+    """Continue the run in ``run_dir`` from its last checkpoint."""
     task_file: str | None = None
-    num_envs: int = 16
-    rollout_steps: int = 64
-    reward_scale: float = 30.0
+    """Path of a task or Duckietown map file; used instead of ``task=`` when set."""
+    num_envs: int = setting(16, check=positive)
+    """Simulations stepped together in one process."""
+    rollout_steps: int = setting(64, check=positive)
+    """Control steps per sub-environment per iteration."""
+    reward_scale: float = setting(30.0, check=positive)
+    """Trained reward = forward progress (m) x this; 30 (the control rate) makes it m/s."""
     absorbing_off_road: bool = False
-    encounters: float = 0.0
-    encounter_horizon: int = 0
-    threads: int = 1
-    checkpoint_every: int = 10
+    """A terminated episode keeps its off-road lane cost for ever
+    (:func:`crllk.training.updates.shape_signals`); slower to learn here."""
+    encounters: float = setting(0.5, check=unit_interval)
+    """Share of training episodes that start 0.3-1.2 m before an obstacle blocking their lane
+    (maps with such obstacles; multipliers and J_* in metrics.csv use the other episodes)."""
+    encounter_horizon: int = setting(0, check=non_negative)
+    """Steps after which such episodes are truncated (0: the task's horizon)."""
+    threads: int = setting(1, check=positive)
+    """Torch CPU threads for the networks (the simulations use one core)."""
+    checkpoint_every: int = setting(10, check=positive)
+    """Iterations between checkpoints (and always at the end)."""
     progress: bool = True
-    record_every: int = 0
-    viewer: str = "none"
-    live: str = "none"
-    live_port: int = 9877
+    """A tqdm progress bar on stderr."""
+    record_every: int = setting(0, check=non_negative)
+    """Iterations between rerun recordings of one evaluation episode (0: off)."""
+    viewer: str = setting("none", check=one_of("none", "spawn", "serve"))
+    """Recordings also stream live: none | spawn (a local viewer) | serve (on 127.0.0.1)."""
+    live: str = setting("none", check=one_of("none", "serve", "spawn"))
+    """One live view of the whole run (metrics per iteration and the recordings): none |
+    serve (on 127.0.0.1:live_port) | spawn (serve and start a viewer)."""
+    live_port: int = setting(9877, check=tcp_port)
+    """Port of the live view's server; connect a viewer with
+    ``rerun --bind 127.0.0.1 --connect rerun+http://127.0.0.1:9877/proxy``."""
     ppo: PPOConfig = field(default_factory=PPOConfig)
-    model: ModelSchema = field(default_factory=ModelSchema)
+    model: ModelConfig = field(default_factory=ModelConfig)
     eval: EvalConfig = field(default_factory=EvalConfig)
     teacher: TeacherConfig = field(default_factory=TeacherConfig)
+
+    def problems(self) -> Iterator[tuple[str, str]]:
+        if self.live != "none" and self.viewer != "none":
+            yield "viewer", (f"must be none with live={self.live} (the live view already shows "
+                             f"the recordings), got {self.viewer!r}")
+        if self.task_file and not Path(self.task_file).exists():
+            yield "task_file", f"no such file: {self.task_file}"
 
     @property
     def task_name(self) -> str:
@@ -154,29 +233,9 @@ class TrainConfig:
         return Path(self.run_dir).expanduser().resolve() if self.run_dir else self.default_run_dir()
 
 
-_CHOICES = {
-    "algo.name": ("crllk", "ppo"),
-    "algo.multiplier": ("dual", "pid"),
-    "algo.schedule": ("episode", "batch"),
-    "action.name": ("discrete", "continuous", "duckietown"),
-    "obs.name": ("state", "pixels"),
-    "model.encoder": ("fast", "original"),
-    "model.critic_input": ("observation", "state"),
-    "viewer": ("none", "spawn", "serve"),
-    "live": ("none", "serve", "spawn"),
-}
-_POSITIVE = ("total_frames", "num_envs", "rollout_steps", "threads", "checkpoint_every",
-             "ppo.epochs", "ppo.minibatch_size", "ppo.lr", "ppo.max_grad_norm",
-             "model.hidden", "model.feature_dim", "eval.episodes", "eval.num_envs",
-             "reward_scale")
-_NON_NEGATIVE = ("seed", "encounter_horizon", "eval.every", "teacher.coeff", "teacher.frames",
-                 "teacher.final", "record_every", "eval.seed", "ppo.entropy_coeff",
-                 "ppo.critic_coeff", "action.baseline_collision_weight")
-_CONSTRAINT_POSITIVE = ("step_size",)
-_CONSTRAINT_NON_NEGATIVE = ("threshold", "initial", "kp", "kd")
-_UNIT_INTERVAL = ("ppo.gamma", "ppo.gae_lambda", "ppo.lr_final_fraction", "encounters")
-_PORTS = 65536
-"""TCP ports are 1 ... 65535."""
+def register_schema(store: ConfigStore) -> None:
+    """Stores :class:`TrainConfig` as ``train_schema``, the first entry of ``train.yaml``."""
+    store.store(name=SCHEMA_NAME, node=TrainConfig)
 
 
 def validate(cfg: DictConfig | dict[str, Any]) -> TrainConfig:
@@ -185,48 +244,14 @@ def validate(cfg: DictConfig | dict[str, Any]) -> TrainConfig:
     Raises:
         ConfigError: naming the first field that is missing, of the wrong type or out of range.
     """
-    schema = OmegaConf.structured(TrainConfig)
-    try:
-        merged = OmegaConf.merge(schema, cfg)
-        config: TrainConfig = OmegaConf.to_object(merged)  # type: ignore[assignment]
-    except OmegaConfBaseException as err:
-        key = getattr(err, "full_key", None) or "<config>"
-        message = str(err).splitlines()[0]
-        raise ConfigError(SOURCE, str(key), message) from None
-    for key, choices in _CHOICES.items():
-        value = _get(config, key)
-        if value not in choices:
-            raise ConfigError(SOURCE, key, f"must be one of {', '.join(choices)}, got {value!r}")
-    for key in _POSITIVE:
-        _check_range(key, _get(config, key), lambda v: v > 0, "must be > 0")
-    for key in _NON_NEGATIVE:
-        _check_range(key, _get(config, key), lambda v: v >= 0, "must be >= 0")
-    for key in _UNIT_INTERVAL:
-        _check_range(key, _get(config, key), lambda v: 0 <= v <= 1, "must lie in [0, 1]")
-    if not 0 < config.ppo.clip_epsilon < 1:
-        raise ConfigError(SOURCE, "ppo.clip_epsilon",
-                          f"must lie in (0, 1), got {config.ppo.clip_epsilon}")
-    for name, constraint in config.algo.constraints.items():
-        where = f"algo.constraints.{name}"
-        for key in _CONSTRAINT_POSITIVE:
-            _check_range(f"{where}.{key}", getattr(constraint, key), lambda v: v > 0,
-                         "must be > 0")
-        for key in _CONSTRAINT_NON_NEGATIVE:
-            _check_range(f"{where}.{key}", getattr(constraint, key), lambda v: v >= 0,
-                         "must be >= 0")
-        if constraint.max_value < constraint.initial:
-            raise ConfigError(SOURCE, f"{where}.max_value",
-                              f"must be >= {where}.initial ({constraint.initial}), "
-                              f"got {constraint.max_value}")
-    if not 0 < config.live_port < _PORTS:
-        raise ConfigError(SOURCE, "live_port", f"must lie in [1, {_PORTS - 1}], got "
-                          f"{config.live_port}")
-    if config.live != "none" and config.viewer != "none":
-        raise ConfigError(SOURCE, "viewer", f"must be none with live={config.live} (the live "
-                          f"view already shows the recordings), got {config.viewer!r}")
-    if config.task_file and not Path(config.task_file).exists():
-        raise ConfigError(SOURCE, "task_file", f"no such file: {config.task_file}")
-    return config
+    return parse(TrainConfig, cfg, SOURCE)
+
+
+def algo_thresholds(name: str = "crllk") -> dict[str, float]:
+    """The constraint thresholds of ``algo=<name>`` (``crllk``: the paper's alpha_1, alpha_2
+    and the crossing constraint's), read from its group file."""
+    group = OmegaConf.load(CONF_DIR / "algo" / f"{name}.yaml")
+    return {key: float(value["threshold"]) for key, value in group["constraints"].items()}
 
 
 def upgrade(stored: DictConfig) -> DictConfig:
@@ -239,17 +264,5 @@ def upgrade(stored: DictConfig) -> DictConfig:
     return stored
 
 
-def _get(config: Any, dotted: str) -> Any:
-    for part in dotted.split("."):
-        config = getattr(config, part)
-    return config
-
-
-def _check_range(key: str, value: float, ok: Any, problem: str) -> None:
-    if isinstance(value, float) and not math.isfinite(value):
-        raise ConfigError(SOURCE, key, f"must be finite, got {value}")
-    if not ok(value):
-        raise ConfigError(SOURCE, key, f"{problem}, got {value}")
-
-
-__all__ = ["ConstraintConfig", "TrainConfig", "upgrade", "validate"]
+__all__ = ["EVALUATION_SEED", "ConstraintConfig", "TrainConfig", "algo_thresholds",
+           "register_schema", "upgrade", "validate"]
