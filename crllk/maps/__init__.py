@@ -6,8 +6,9 @@ from pathlib import Path
 
 from crllk.errors import MapError
 from crllk.files import read_yaml
-from crllk.maps.format import MapObject, MapSpec, Tile, parse_map
+from crllk.maps.format import MapSpec, Tile, parse_map
 from crllk.maps.lanes import Lane
+from crllk.maps.objects import MapObject
 from crllk.maps.road import DuckietownMap, LanePose
 from crllk.paths import task_file, task_names
 

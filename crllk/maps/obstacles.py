@@ -13,8 +13,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from crllk.maps.format import MapObject
 from crllk.maps.lanes import LANE_OFFSET, Lane
+from crllk.maps.objects import MapObject
 from crllk.maps.road import DuckietownMap, LanePose
 
 _FOOTPRINT_SAMPLES = 5
