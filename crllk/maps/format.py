@@ -21,6 +21,7 @@ HEADINGS = ("N", "E", "S", "W")
 """Compass headings; also the names of a tile's four edges."""
 
 DRIVABLE_KINDS = ("straight", "curve_left", "curve_right", "3way_left", "3way_right", "4way")
+INTERSECTION_KINDS = ("3way_left", "3way_right", "4way")
 DECOR_KINDS = ("asphalt", "floor", "grass", "calibration_tile")
 EMPTY_KIND = "empty"
 
@@ -53,6 +54,11 @@ class Tile:
     @property
     def drivable(self) -> bool:
         return self.kind in DRIVABLE_KINDS
+
+    @property
+    def intersection(self) -> bool:
+        """Whether the tile is a three- or four-way intersection (no lane lines inside)."""
+        return self.kind in INTERSECTION_KINDS
 
     @property
     def label(self) -> str:

@@ -12,6 +12,9 @@ from crllk.maps.objects import MapObject
 
 _ALIGNED_COS = math.cos(math.radians(45.0))
 """Lanes whose heading is within 45 degrees of the robot's count as its travel direction."""
+HEADING_WEIGHT = 0.2
+"""Where several lanes run the robot's way (intersections), the lane pose is taken against the
+one nearest in lateral offset plus this many metres per radian of heading difference (m/rad)."""
 
 
 def openings(tile: Tile) -> tuple[str, ...]:
@@ -163,9 +166,13 @@ class DuckietownMap:
         for lane in lanes:
             proj = lane.project(x, y)
             alignment = math.cos(yaw - proj.heading)
-            # Aligned lanes first, then the closest of them, then the best aligned.
-            key = (alignment < _ALIGNED_COS, abs(proj.lateral) if alignment >= _ALIGNED_COS
-                   else -alignment)
+            # Aligned lanes first, then the closest of them in offset and heading (several
+            # only on intersections), else the best aligned.
+            if alignment >= _ALIGNED_COS:
+                key = (False, abs(proj.lateral)
+                       + HEADING_WEIGHT * abs(wrap_angle(yaw - proj.heading)))
+            else:
+                key = (True, -alignment)
             if best is None or key < best[0]:
                 best = (key, lane, proj)
         return best[1], best[2]
