@@ -31,8 +31,11 @@ DEFAULT_ORIENTATION = "E"
 have one."""
 
 MAX_MAP_TILES = 1024
-"""Most tiles (rows x columns) a map may have: 32 x 32, well above the largest Duckietown maps
-(about 200 tiles); building the scene takes time and memory in proportion."""
+"""Most tiles (rows x columns) a map may have: 32 x 32, five times the largest Duckietown maps
+(about 200 tiles). Building the scene takes time and memory in proportion: about 10 s and
+0.5 GB at the limit."""
+MAX_MAP_SIDE = 64
+"""Most rows, and most columns, a map may have (the longest Duckietown map is 36 tiles)."""
 MAX_MAP_OBJECTS = 1000
 """Most objects a map may list (before AprilTags are left out); the largest Duckietown maps
 list under 150."""
@@ -110,14 +113,18 @@ def parse_map(data: Any, *, name: str, source: str | Path, field_prefix: str = "
 
 
 def _check_limits(data: Mapping, source: str, field_prefix: str) -> None:
-    """Refuse maps beyond :data:`MAX_MAP_TILES` or :data:`MAX_MAP_OBJECTS` before reading
-    their tiles and objects."""
+    """Refuse maps beyond :data:`MAX_MAP_SIDE`, :data:`MAX_MAP_TILES` or
+    :data:`MAX_MAP_OBJECTS` before reading their tiles and objects."""
     raw_tiles = data.get("tiles")
     if isinstance(raw_tiles, list):
-        tiles = sum(len(row) if isinstance(row, list) else 1 for row in raw_tiles)
-        if tiles > MAX_MAP_TILES:
-            raise MapError(source, f"{field_prefix}tiles",
-                           f"{tiles} tiles, more than the {MAX_MAP_TILES} a map may have")
+        lengths = [len(row) if isinstance(row, list) else 1 for row in raw_tiles]
+        size = f"{len(lengths)} x {max(lengths, default=0)} (rows x columns)"
+        if max([len(lengths), *lengths]) > MAX_MAP_SIDE:
+            raise MapError(source, f"{field_prefix}tiles", f"{size}: a map may have at most "
+                           f"{MAX_MAP_SIDE} rows and {MAX_MAP_SIDE} columns")
+        if sum(lengths) > MAX_MAP_TILES:
+            raise MapError(source, f"{field_prefix}tiles", f"{size}, {sum(lengths)} tiles, "
+                           f"more than the {MAX_MAP_TILES} a map may have")
     raw_objects = data.get("objects")
     if isinstance(raw_objects, list | Mapping) and len(raw_objects) > MAX_MAP_OBJECTS:
         raise MapError(source, f"{field_prefix}objects", f"{len(raw_objects)} objects, more "
