@@ -1,8 +1,11 @@
 """The Duckietown map format: parse and validate a map description.
 
 A map is a grid of tiles (``kind/ORIENT``, row 0 at the north edge), a ``tile_size`` in metres
-and optional ``objects``. World frame: x east, y north; tile (column i, row j) of an R-row grid
-covers x in [i*s, (i+1)*s] and y in [(R-1-j)*s, (R-j)*s].
+and optional ``objects`` (a list or a mapping of named objects; :mod:`crllk.maps.objects`).
+World frame: x east, y north; tile (column i, row j) of an R-row grid covers x in
+[i*s, (i+1)*s] and y in [(R-1-j)*s, (R-j)*s]. Maps beyond :data:`MAX_MAP_SIDE`,
+:data:`MAX_MAP_TILES` or :data:`MAX_MAP_OBJECTS` are refused before their tiles and objects are
+read.
 """
 
 from __future__ import annotations
@@ -47,7 +50,8 @@ episodes start at random road poses. Other keys are ignored with a :class:`MapWa
 
 @dataclass(frozen=True)
 class Tile:
-    """One grid cell: ``kind`` and, for road tiles, ``orientation`` (N, E, S or W)."""
+    """One grid cell: ``kind`` and, for road tiles but ``4way``, ``orientation`` (N, E, S or
+    W)."""
 
     kind: str
     orientation: str | None
