@@ -23,6 +23,14 @@ class MapError(ConfigError):
     """A Duckietown map description that cannot be built."""
 
 
+class MapWarning(UserWarning):
+    """Part of a map description that is read and ignored: ``<source>: <field>: <what>``."""
+
+    def __init__(self, source: str | Path, field: str, problem: str) -> None:
+        self.source, self.field, self.problem = str(source), field, problem
+        super().__init__(f"{self.source}: {field}: {problem}")
+
+
 class RecordingError(ConfigError):
     """A recording that cannot be written: ``<path>: cannot write the recording: <reason>``."""
 

@@ -1,7 +1,8 @@
 """Bad map and task files: each gives one clear error naming the file, the field and the problem.
 
 Design section 8: a malformed task or map file, an unknown tile or object kind, a road that does
-not connect or an object off the map gives one message ``<file>: <field>: <problem>``.
+not connect, an object off the map or a map beyond the size limits gives one message
+``<file>: <field>: <problem>``.
 """
 
 from __future__ import annotations
@@ -11,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from crllk.errors import ConfigError, MapError
+from crllk.errors import ConfigError, MapError, MapWarning
 from crllk.maps import load_map
 from crllk.tasks.config import load_task_config
 
@@ -52,12 +53,6 @@ MAP_CASES = [
      "tiles[2][2]", ["bad orientation"]),
     ("ragged_rows", _map_text(_replace(1, "asphalt,", "")),
      "tiles[1]", ["ragged", "2 tiles", "row 0 has 3"]),
-    # Top-right corner replaced by asphalt: the top straight (row 0, column 1) opens east onto it.
-    ("road_onto_asphalt", _map_text(_replace(0, "curve_left/N", "asphalt")),
-     "tiles[0][1]", ["opens to the E onto 'asphalt'", "does not connect"]),
-    # One row of two east-west straights: the west one opens off the west edge of the map.
-    ("road_off_the_map", _map_text(["[straight/E, straight/E]"]),
-     "tiles[0][0]", ["opens to the W off the edge of the map", "does not connect"]),
     ("road_onto_road_not_opening_back", _map_text(_replace(2, "straight/E", "straight/N")),
      "tiles[2][0]", ["onto 'straight/N'", "does not open back"]),
     ("no_road_at_all", _map_text(["[asphalt, floor]", "[grass, empty]"]),
@@ -81,9 +76,25 @@ MAP_CASES = [
     ("negative_tile_size", _map_text(tile_size="-0.585"), "tile_size", ["positive"]),
     ("text_tile_size", _map_text(tile_size="big"), "tile_size", ["expected a number"]),
     ("missing_tiles", "tile_size: 0.585\n", "tiles", ["missing"]),
-    ("unknown_map_key", _map_text(extra="tile_colour: red\n"), "tile_colour", ["unknown key"]),
-    ("unknown_keys_of_mixed_types", _map_text(extra="tile_colour: red\n7: seven\n"),
-     "7", ["unknown key"]),
+    ("too_many_tiles", _map_text([str(["asphalt"] * 40)] * 40), "tiles",
+     ["40 x 40 (rows x columns), 1600 tiles", "more than the 1024"]),
+    ("too_long_a_side", _map_text([str(["straight/E"] * 65)]), "tiles",
+     ["1 x 65 (rows x columns)", "at most 64 rows and 64 columns"]),
+    ("too_many_objects", _map_text(extra="objects:\n" + "  - {kind: duckie, pos: [1, 1]}\n" * 1001),
+     "objects", ["1001 objects", "more than the 1000"]),
+    ("objects_neither_list_nor_mapping", _map_text(extra="objects: 7\n"), "objects",
+     ["expected a list of objects or a mapping of named objects"]),
+    ("named_object_unknown_kind", _map_text(extra="objects:\n  d1: {kind: dragon, pos: [1, 1]}\n"),
+     "objects.d1.kind", ["unknown object kind", "dragon"]),
+    ("place_tile_off_the_map",
+     _map_text(extra="objects:\n  b: {kind: bus, place: {tile: [3, 0], relative: {}}}\n"),
+     "objects.b.place.tile", ["[3, 0] is off the map"]),
+    ("attach_bad_slot",
+     _map_text(extra="objects:\n  s: {kind: sign_stop, attach: {tile: [1, 1], slot: 8}}\n"),
+     "objects.s.attach.slot", ["expected a slot number 0 to 7, got 8"]),
+    ("pose_off_the_map",
+     _map_text(extra="objects:\n  t: {kind: tree, pose: {~SE2Transform: {p: [-1, 0]}}}\n"),
+     "objects.t", ["off the map"]),
     ("yaml_syntax", _map_text(extra="objects: [{kind: duckie, pos: [1.5, 1.5]\n"),
      "line", ["not valid YAML"]),
     ("not_a_mapping", "- just\n- a list\n", "<top>", ["expected a mapping"]),
@@ -114,7 +125,40 @@ def test_unknown_tile_kind_message_is_one_line(tmp_path):
         load_map(path)
     assert str(info.value).splitlines() == [
         f"{path}: tiles[1][1]: unknown tile kind 'bridge' (known: straight, curve_left, "
-        "curve_right, 3way_left, 3way_right, 4way, asphalt, floor, grass, empty)"]
+        "curve_right, 3way_left, 3way_right, 4way, asphalt, floor, grass, calibration_tile, "
+        "empty)"]
+
+
+def test_unknown_map_keys_are_ignored_with_one_warning(tmp_path):
+    """Unknown top-level keys load with one single-line warning naming them; the Duckietown
+    keys start_tile, start_pose and version load without one."""
+    path = tmp_path / "extra_keys.yaml"
+    path.write_text(_map_text(extra="tile_colour: red\n7: seven\nversion: 2\n"
+                                    "start_tile: [0, 1]\nstart_pose: [[0.48, 0, 0.29], 0]\n"))
+    with pytest.warns(MapWarning) as record:
+        dmap = load_map(path)
+    assert len(dmap.road_tiles) == 8
+    assert [str(w.message) for w in record] == [
+        f"{path}: tile_colour, 7: unknown map keys, ignored"]
+
+
+def test_file_too_large_is_refused_before_parsing(tmp_path):
+    """A file over the size limit is refused without reading its YAML."""
+    path = tmp_path / "huge.yaml"
+    path.write_text(_map_text() + "objects:\n" + "  - {kind: duckie, pos: [1, 1]}\n" * 20000)
+    with pytest.raises(MapError, match=r"huge\.yaml: <file>: \d+ bytes, more than the 524288"):
+        load_map(path)
+
+
+def test_dead_ends_load(tmp_path):
+    """A road that opens off the map or onto a tile that is not road is a dead end: the map
+    loads and lists it (the robot leaves the road there)."""
+    off_the_map = tmp_path / "two_straights.yaml"
+    off_the_map.write_text(_map_text(["[straight/E, straight/E]"]))
+    assert load_map(off_the_map).dead_ends == ((0, 0, "W"), (1, 0, "E"))
+    onto_asphalt = tmp_path / "onto_asphalt.yaml"
+    onto_asphalt.write_text(_map_text(_replace(0, "curve_left/N", "asphalt")))
+    assert load_map(onto_asphalt).dead_ends == ((1, 0, "E"), (2, 1, "N"))
 
 
 TASK_CASES = [

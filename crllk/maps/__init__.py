@@ -4,20 +4,23 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from crllk.errors import MapError
+from crllk.errors import MapError, MapWarning
 from crllk.files import read_yaml
-from crllk.maps.format import MapObject, MapSpec, Tile, parse_map
+from crllk.maps.format import MapSpec, Tile, parse_map
 from crllk.maps.lanes import Lane
+from crllk.maps.objects import MapObject
 from crllk.maps.road import DuckietownMap, LanePose
 from crllk.paths import task_file, task_names
 
-__all__ = ["DuckietownMap", "Lane", "LanePose", "MapError", "MapObject", "MapSpec", "Tile",
-           "load_map"]
+__all__ = ["DuckietownMap", "Lane", "LanePose", "MapError", "MapObject", "MapSpec", "MapWarning",
+           "Tile", "load_map"]
 
 
 def load_map(name_or_path: str | Path) -> DuckietownMap:
     """Load a map by task name (``small_loop``, ``zigzag``, ``obstacle_loop``, ...) or from a
     Duckietown map file or task file given by path.
+
+    Unknown map keys are ignored with a :class:`MapWarning` naming them.
 
     Raises:
         MapError: naming the file and field when the map cannot be built.

@@ -1,44 +1,57 @@
 """The Duckietown map format: parse and validate a map description.
 
 A map is a grid of tiles (``kind/ORIENT``, row 0 at the north edge), a ``tile_size`` in metres
-and optional ``objects``. World frame: x east, y north; tile (column i, row j) of an R-row grid
-covers x in [i*s, (i+1)*s] and y in [(R-1-j)*s, (R-j)*s].
+and optional ``objects`` (a list or a mapping of named objects; :mod:`crllk.maps.objects`).
+World frame: x east, y north; tile (column i, row j) of an R-row grid covers x in
+[i*s, (i+1)*s] and y in [(R-1-j)*s, (R-j)*s]. Maps beyond :data:`MAX_MAP_SIDE`,
+:data:`MAX_MAP_TILES` or :data:`MAX_MAP_OBJECTS` are refused before their tiles and objects are
+read.
 """
 
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from crllk.errors import MapError
+from crllk.errors import MapError, MapWarning
+from crllk.maps.objects import MapObject, parse_objects
 
 HEADINGS = ("N", "E", "S", "W")
 """Compass headings; also the names of a tile's four edges."""
 
 DRIVABLE_KINDS = ("straight", "curve_left", "curve_right", "3way_left", "3way_right", "4way")
-DECOR_KINDS = ("asphalt", "floor", "grass")
+INTERSECTION_KINDS = ("3way_left", "3way_right", "4way")
+DECOR_KINDS = ("asphalt", "floor", "grass", "calibration_tile")
 EMPTY_KIND = "empty"
 
-# Footprint length (along the object's heading) x width x height in metres at the reference
-# height, from the Duckietown object table. Other heights scale the whole box proportionally.
-OBJECT_SIZES: dict[str, tuple[float, float, float]] = {
-    "duckie": (0.065, 0.045, 0.060),
-    "cone": (0.051, 0.051, 0.080),
-    "barrier": (0.285, 0.057, 0.080),
-    "duckiebot": (0.195, 0.144, 0.120),
-    "bus": (0.659, 0.206, 0.180),
-    "truck": (0.362, 0.156, 0.200),
-    "tree": (0.140, 0.140, 0.250),
-    "sign_blank": (0.057, 0.086, 0.180),
-}
+DEFAULT_ORIENTATION = "E"
+"""Orientation of a straight or three-way tile written without one (``straight``,
+``3way_left``), as the Duckietown simulator reads it. A four-way tile needs none; a curve must
+have one."""
+
+MAX_MAP_TILES = 1024
+"""Most tiles (rows x columns) a map may have: 32 x 32, five times the largest Duckietown maps
+(about 200 tiles). Building the scene takes time and memory in proportion: about 10 s and
+0.5 GB at the limit."""
+MAX_MAP_SIDE = 64
+"""Most rows, and most columns, a map may have (the longest Duckietown map is 36 tiles)."""
+MAX_MAP_OBJECTS = 1000
+"""Most objects a map may list (before AprilTags are left out); the largest Duckietown maps
+list under 150."""
+
+MAP_KEYS = ("tiles", "tile_size", "objects", "name", "start_tile", "start_pose", "version")
+"""Keys a map may have. ``start_tile``, ``start_pose`` and ``version`` are accepted and unused:
+episodes start at random road poses. Other keys are ignored with a :class:`MapWarning`."""
 
 
 @dataclass(frozen=True)
 class Tile:
-    """One grid cell: ``kind`` and, for road tiles, ``orientation`` (N, E, S or W)."""
+    """One grid cell: ``kind`` and, for road tiles but ``4way``, ``orientation`` (N, E, S or
+    W)."""
 
     kind: str
     orientation: str | None
@@ -50,23 +63,13 @@ class Tile:
         return self.kind in DRIVABLE_KINDS
 
     @property
+    def intersection(self) -> bool:
+        """Whether the tile is a three- or four-way intersection (no lane lines inside)."""
+        return self.kind in INTERSECTION_KINDS
+
+    @property
     def label(self) -> str:
         return self.kind if self.orientation is None else f"{self.kind}/{self.orientation}"
-
-
-@dataclass(frozen=True)
-class MapObject:
-    """A static object; position and size in metres, ``yaw`` in radians (CCW from +x)."""
-
-    kind: str
-    x: float
-    y: float
-    yaw: float
-    length: float
-    width: float
-    height: float
-    static: bool = True
-    optional: bool = False
 
 
 @dataclass(frozen=True)
@@ -100,19 +103,36 @@ def parse_map(data: Any, *, name: str, source: str | Path, field_prefix: str = "
     if "tile_size" not in data:
         raise MapError(source, f"{field_prefix}tile_size", "missing (the tile pitch in metres)")
     tile_size = _positive_number(data["tile_size"], source, f"{field_prefix}tile_size")
+    _check_limits(data, source, field_prefix)
     tiles = _parse_tiles(data.get("tiles"), source, f"{field_prefix}tiles")
-    rows, columns = len(tiles), len(tiles[0])
-    raw_objects = data.get("objects") or []
-    if not isinstance(raw_objects, list):
-        raise MapError(source, f"{field_prefix}objects", "expected a list of objects")
-    objects = tuple(
-        _parse_object(obj, tile_size, rows, columns, source, f"{field_prefix}objects[{k}]")
-        for k, obj in enumerate(raw_objects)
-    )
-    unknown = set(data) - {"tiles", "tile_size", "objects", "start_tile", "name"}
+    objects = parse_objects(data.get("objects"), tile_size=tile_size, rows=len(tiles),
+                            columns=len(tiles[0]), source=source,
+                            field=f"{field_prefix}objects")
+    unknown = [str(key) for key in data if key not in MAP_KEYS]
     if unknown:
-        raise MapError(source, f"{field_prefix}{sorted(unknown, key=str)[0]}", "unknown key")
+        warnings.warn(MapWarning(source, ", ".join(field_prefix + key for key in unknown),
+                                 "unknown map key" + ("s" if len(unknown) > 1 else "")
+                                 + ", ignored"), stacklevel=2)
     return MapSpec(name=name, source=source, tile_size=tile_size, tiles=tiles, objects=objects)
+
+
+def _check_limits(data: Mapping, source: str, field_prefix: str) -> None:
+    """Refuse maps beyond :data:`MAX_MAP_SIDE`, :data:`MAX_MAP_TILES` or
+    :data:`MAX_MAP_OBJECTS` before reading their tiles and objects."""
+    raw_tiles = data.get("tiles")
+    if isinstance(raw_tiles, list):
+        lengths = [len(row) if isinstance(row, list) else 1 for row in raw_tiles]
+        size = f"{len(lengths)} x {max(lengths, default=0)} (rows x columns)"
+        if max([len(lengths), *lengths]) > MAX_MAP_SIDE:
+            raise MapError(source, f"{field_prefix}tiles", f"{size}: a map may have at most "
+                           f"{MAX_MAP_SIDE} rows and {MAX_MAP_SIDE} columns")
+        if sum(lengths) > MAX_MAP_TILES:
+            raise MapError(source, f"{field_prefix}tiles", f"{size}, {sum(lengths)} tiles, "
+                           f"more than the {MAX_MAP_TILES} a map may have")
+    raw_objects = data.get("objects")
+    if isinstance(raw_objects, list | Mapping) and len(raw_objects) > MAX_MAP_OBJECTS:
+        raise MapError(source, f"{field_prefix}objects", f"{len(raw_objects)} objects, more "
+                       f"than the {MAX_MAP_OBJECTS} a map may have")
 
 
 def _positive_number(value: Any, source: str, field: str) -> float:
@@ -145,64 +165,15 @@ def _parse_tiles(raw: Any, source: str, field: str) -> tuple[tuple[Tile, ...], .
 def _parse_tile(raw: Any, column: int, row: int, source: str, field: str) -> Tile:
     if not isinstance(raw, str):
         raise MapError(source, field, f"expected a string like 'straight/N', got {raw!r}")
-    kind, _, orientation = raw.strip().partition("/")
+    kind, slash, orientation = raw.strip().partition("/")
+    kind, orientation = kind.strip(), orientation.strip()
     known = DRIVABLE_KINDS + DECOR_KINDS + (EMPTY_KIND,)
     if kind not in known:
         raise MapError(source, field, f"unknown tile kind {kind!r} (known: {', '.join(known)})")
-    if kind in DRIVABLE_KINDS:
-        if orientation not in HEADINGS:
-            raise MapError(
-                source, field, f"bad orientation {orientation!r} in {raw!r} (use N, E, S or W)"
-            )
-        return Tile(kind, orientation, column, row)
-    if orientation and orientation not in HEADINGS:
-        raise MapError(source, field, f"bad orientation {orientation!r} in {raw!r}")
-    return Tile(kind, None, column, row)
-
-
-def _parse_object(
-    raw: Any, tile_size: float, rows: int, columns: int, source: str, field: str
-) -> MapObject:
-    if not isinstance(raw, Mapping):
-        raise MapError(source, field, "expected a mapping with kind and pos")
-    kind = raw.get("kind")
-    if not isinstance(kind, str) or kind not in OBJECT_SIZES:
-        raise MapError(
-            source, f"{field}.kind",
-            f"unknown object kind {kind!r} (known: {', '.join(OBJECT_SIZES)})",
-        )
-    pos = raw.get("pos")
-    if (not isinstance(pos, list | tuple) or len(pos) != 2
-            or not all(isinstance(p, int | float) and not isinstance(p, bool) for p in pos)):
-        raise MapError(source, f"{field}.pos", f"expected [x, z] in tile units, got {pos!r}")
-    px, pz = float(pos[0]), float(pos[1])
-    if not (0.0 <= px <= columns and 0.0 <= pz <= rows):
-        raise MapError(
-            source, f"{field}.pos",
-            f"{[px, pz]} is off the map (x in [0, {columns}], z in [0, {rows}] tile units)",
-        )
-    rotate = raw.get("rotate", 0.0)
-    if (isinstance(rotate, bool) or not isinstance(rotate, int | float)
-            or not math.isfinite(rotate)):
-        raise MapError(source, f"{field}.rotate", f"expected degrees, got {rotate!r}")
-    length, width, height = OBJECT_SIZES[kind]
-    if "height" in raw:
-        scale = _positive_number(raw["height"], source, f"{field}.height") / height
-    elif "scale" in raw:
-        scale = _positive_number(raw["scale"], source, f"{field}.scale")
-    else:
-        scale = 1.0
-    for flag in ("static", "optional"):
-        if flag in raw and not isinstance(raw[flag], bool):
-            raise MapError(source, f"{field}.{flag}", f"expected true or false, got {raw[flag]!r}")
-    return MapObject(
-        kind=kind,
-        x=px * tile_size,
-        y=(rows - pz) * tile_size,
-        yaw=math.radians(float(rotate)),
-        length=length * scale,
-        width=width * scale,
-        height=height * scale,
-        static=raw.get("static", True),
-        optional=raw.get("optional", False),
-    )
+    if not slash and kind in ("straight", "3way_left", "3way_right"):
+        orientation = DEFAULT_ORIENTATION
+    oriented = kind in DRIVABLE_KINDS and kind != "4way"
+    if (oriented or orientation) and orientation not in HEADINGS:
+        raise MapError(source, field,
+                       f"bad orientation {orientation!r} in {raw!r} (use N, E, S or W)")
+    return Tile(kind, orientation if oriented else None, column, row)

@@ -13,8 +13,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from crllk.maps.format import MapObject
 from crllk.maps.lanes import LANE_OFFSET, Lane
+from crllk.maps.objects import MapObject
 from crllk.maps.road import DuckietownMap, LanePose
 
 _FOOTPRINT_SAMPLES = 5
@@ -66,19 +66,28 @@ def road_band(dmap: DuckietownMap) -> tuple[float, float]:
 
 
 class ObstacleIndex:
-    """The map's objects that stand on the road, per lane; see the module docstring."""
+    """The map's objects that stand on the road, per lane; see the module docstring. Objects the
+    robot does not collide with (:attr:`~crllk.maps.objects.MapObject.collidable`) are left
+    out."""
 
     def __init__(self, dmap: DuckietownMap) -> None:
         self.map = dmap
         left_edge, right_edge = road_band(dmap)
+        # Footprint points of each object the robot collides with, by the tile they lie on.
+        by_tile: dict[tuple[int, int], list[tuple[int, list[tuple[float, float]]]]] = {}
+        for index, obj in enumerate(dmap.objects):
+            if not obj.collidable:
+                continue
+            points: dict[tuple[int, int] | None, list[tuple[float, float]]] = {}
+            for p in footprint_points(obj):
+                points.setdefault(dmap.tile_index(*p), []).append(p)
+            for tile, on_tile in points.items():
+                if tile is not None:
+                    by_tile.setdefault(tile, []).append((index, on_tile))
         self._by_lane: dict[Lane, tuple[LaneObstacle, ...]] = {}
         for lane in dmap.lanes:
             found = []
-            for index, obj in enumerate(dmap.objects):
-                on_tile = [p for p in footprint_points(obj)
-                           if dmap.tile_index(*p) == (lane.column, lane.row)]
-                if not on_tile:
-                    continue
+            for index, on_tile in by_tile.get((lane.column, lane.row), ()):
                 projections = [lane.project(x, y) for x, y in on_tile]
                 lateral = [p.lateral for p in projections]
                 if max(lateral) < left_edge or min(lateral) > right_edge:

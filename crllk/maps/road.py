@@ -6,11 +6,15 @@ import math
 from dataclasses import dataclass
 
 from crllk.errors import MapError
-from crllk.maps.format import MapObject, MapSpec, Tile
+from crllk.maps.format import MapSpec, Tile
 from crllk.maps.lanes import LEFT_OF, OPPOSITE, RIGHT_OF, UNIT, Lane, build_lane, wrap_angle
+from crllk.maps.objects import MapObject
 
 _ALIGNED_COS = math.cos(math.radians(45.0))
 """Lanes whose heading is within 45 degrees of the robot's count as its travel direction."""
+HEADING_WEIGHT = 0.2
+"""Where several lanes run the robot's way (intersections), the lane pose is taken against the
+one nearest in lateral offset plus this many metres per radian of heading difference (m/rad)."""
 
 
 def openings(tile: Tile) -> tuple[str, ...]:
@@ -92,7 +96,8 @@ class DuckietownMap:
             t for row in spec.tiles for t in row if t.drivable)
         if not self.road_tiles:
             raise MapError(spec.source, "tiles", "the map has no drivable tile")
-        self._check_connections()
+        self.dead_ends: tuple[tuple[int, int, str], ...] = tuple(self._check_connections())
+        """Road openings (column, row, edge) off the map or onto a tile that is not road."""
         self._lanes: dict[tuple[int, int, str], list[Lane]] = {}
         for t in self.road_tiles:
             edges = openings(t)
@@ -161,9 +166,13 @@ class DuckietownMap:
         for lane in lanes:
             proj = lane.project(x, y)
             alignment = math.cos(yaw - proj.heading)
-            # Aligned lanes first, then the closest of them, then the best aligned.
-            key = (alignment < _ALIGNED_COS, abs(proj.lateral) if alignment >= _ALIGNED_COS
-                   else -alignment)
+            # Aligned lanes first, then the closest of them in offset and heading (several
+            # only on intersections), else the best aligned.
+            if alignment >= _ALIGNED_COS:
+                key = (False, abs(proj.lateral)
+                       + HEADING_WEIGHT * abs(wrap_angle(yaw - proj.heading)))
+            else:
+                key = (True, -alignment)
             if best is None or key < best[0]:
                 best = (key, lane, proj)
         return best[1], best[2]
@@ -271,19 +280,27 @@ class DuckietownMap:
                    for ln in lanes)
 
     # ----- validation -------------------------------------------------------------------
-    def _check_connections(self) -> None:
+    def _check_connections(self) -> list[tuple[int, int, str]]:
+        """The dead ends (column, row, edge): road openings off the map or onto a tile that is
+        not road, where driving on leaves the road.
+
+        Raises:
+            MapError: where a road tile opens onto a road tile that does not open back.
+        """
+        dead_ends = []
         for t in self.road_tiles:
             for edge in openings(t):
                 dx, dy = UNIT[edge]
                 column, row = t.column + int(dx), t.row - int(dy)
-                where = f"tiles[{t.row}][{t.column}]"
                 if not (0 <= column < self.columns and 0 <= row < self.rows):
-                    raise MapError(self.spec.source, where,
-                                   f"{t.label!r} opens to the {edge} off the edge of the map: "
-                                   "the road does not connect")
+                    dead_ends.append((t.column, t.row, edge))
+                    continue
                 other = self.tile(column, row)
-                if OPPOSITE[edge] not in openings(other):
-                    raise MapError(self.spec.source, where,
+                if not other.drivable:
+                    dead_ends.append((t.column, t.row, edge))
+                elif OPPOSITE[edge] not in openings(other):
+                    raise MapError(self.spec.source, f"tiles[{t.row}][{t.column}]",
                                    f"{t.label!r} opens to the {edge} onto {other.label!r} at "
                                    f"tiles[{row}][{column}], which does not open back: "
                                    "the road does not connect")
+        return dead_ends

@@ -1,9 +1,10 @@
 """Build a MuJoCo scene from a Duckietown map: textured floor, obstacles, lights, cameras, robot.
 
 The scene is an ``mujoco.MjSpec``: the map's floor is one textured quad (markings drawn by
-:mod:`crllk.sim.texture`), physics uses one invisible ground plane, each obstacle is an invisible
-collision box of its reference footprint plus a few visual primitives, and the Duckiebot from
-``assets/mjcf/duckiebot.xml`` is attached under the prefix ``duckiebot/``.
+:mod:`crllk.sim.texture`), physics uses one invisible ground plane, each object is a few visual
+primitives plus, if the robot collides with it, an invisible collision box of its footprint,
+and the Duckiebot from ``assets/mjcf/duckiebot.xml`` is attached under the prefix
+``duckiebot/``.
 """
 
 from __future__ import annotations
@@ -150,7 +151,27 @@ _PARTS: dict[str, list[tuple]] = {
              (_ELL, (0.5, 0.5, 0.4), (0, 0, 0.6), [0.2, 0.55, 0.2, 1])],
     "sign_blank": [(_CYL, (0.1, 0.4), (0, 0, 0.4), [0.6, 0.6, 0.6, 1]),
                    (_BOX, (0.1, 0.5, 0.2), (0, 0, 0.8), _WHITE)],
+    "house": [(_BOX, (0.5, 0.5, 0.33), (0, 0, 0.33), [0.85, 0.8, 0.7, 1]),
+              (_BOX, (0.5, 0.5, 0.17), (0, 0, 0.83), [0.6, 0.2, 0.15, 1])],
+    "building": [(_BOX, (0.5, 0.5, 0.5), (0, 0, 0.5), [0.7, 0.7, 0.72, 1]),
+                 (_BOX, (0.51, 0.4, 0.05), (0, 0, 0.75), [0.3, 0.4, 0.5, 1])],
+    "trafficlight": [(_CYL, (0.15, 0.5), (0, 0, 0.5), [0.3, 0.3, 0.3, 1]),
+                     (_BOX, (0.15, 0.5, 0.03), (0, 0, 0.9), [0.3, 0.3, 0.3, 1]),
+                     (_BOX, (0.3, 0.08, 0.06), (0, 0, 0.85), [0.9, 0.15, 0.1, 1])],
+    "checkerboard": [(_BOX, (0.05, 0.5, 0.5), (0, 0, 0.5), _WHITE)],
 }
+_SIGN_POLE = (_CYL, (0.12, 0.35), (0, 0, 0.35), [0.6, 0.6, 0.6, 1])
+_SIGN_FACE_RGBA = {"sign_stop": [0.85, 0.1, 0.1, 1], "sign_yield": [0.85, 0.1, 0.1, 1],
+                   "sign_do_not_enter": [0.85, 0.1, 0.1, 1]}
+"""Colour of a sign's face (white where not given)."""
+
+
+def _parts(kind: str) -> list[tuple]:
+    """Visual parts of an object kind; every traffic sign is a pole carrying a plate."""
+    if kind in _PARTS:
+        return _PARTS[kind]
+    face = _SIGN_FACE_RGBA.get(kind, _WHITE)
+    return [_SIGN_POLE, (_BOX, (0.15, 0.5, 0.15), (0, 0, 0.85), face)]
 
 
 def _add_obstacle(spec: mujoco.MjSpec, obj: MapObject, index: int) -> None:
@@ -158,11 +179,12 @@ def _add_obstacle(spec: mujoco.MjSpec, obj: MapObject, index: int) -> None:
         name=f"{C.OBSTACLE_PREFIX}{index}_{obj.kind}", pos=[obj.x, obj.y, 0.0],
         quat=[math.cos(obj.yaw / 2), 0, 0, math.sin(obj.yaw / 2)])
     dims = np.array([obj.length, obj.width, obj.height])
-    body.add_geom(name=f"{C.OBSTACLE_PREFIX}{index}", type=_BOX,
-                  size=[obj.length / 2, obj.width / 2, obj.height / 2],
-                  pos=[0, 0, obj.height / 2], contype=_OBSTACLE_CONTYPE,
-                  conaffinity=_OBSTACLE_CONAFFINITY, group=3, rgba=[1, 0, 0, 0.2])
-    for geom_type, size, pos, rgba in _PARTS[obj.kind]:
+    if obj.collidable:
+        body.add_geom(name=f"{C.OBSTACLE_PREFIX}{index}", type=_BOX,
+                      size=[obj.length / 2, obj.width / 2, obj.height / 2],
+                      pos=[0, 0, obj.height / 2], contype=_OBSTACLE_CONTYPE,
+                      conaffinity=_OBSTACLE_CONAFFINITY, group=3, rgba=[1, 0, 0, 0.2])
+    for geom_type, size, pos, rgba in _parts(obj.kind):
         scaled_size = _scale_size(geom_type, np.array(size), dims)
         body.add_geom(type=geom_type, size=scaled_size, pos=(np.array(pos) * dims).tolist(),
                       rgba=rgba, contype=0, conaffinity=0, group=1)

@@ -29,7 +29,9 @@ ROAD_RGB = (75, 72, 69)
 WHITE_RGB = (238, 238, 238)
 YELLOW_RGB = (238, 225, 77)
 DECOR_RGB = {"asphalt": (62, 58, 51), "floor": (149, 154, 82), "grass": (93, 129, 44),
-             "empty": (30, 30, 34)}
+             "calibration_tile": (212, 212, 212), "empty": (30, 30, 34)}
+"""Flat colours of the tiles that are not road (the calibration tile: its mean colour, a white
+tile with a black checkerboard)."""
 
 PIXELS_PER_TILE = 128
 """Texels along one tile edge (4.6 mm per texel for 0.585 m tiles)."""

@@ -3,10 +3,11 @@
 Per control step (30 Hz by default): the action becomes wheel duty cycles; the reward is the
 forward progress along the lane (m); the task computes every per-step signal of
 :data:`crllk.tasks.constraints.SIGNALS` (lane deviation in decimetres, 10 off the road; 1 on the
-step that ends in a collision or a road departure; 1 on a step that crosses a lane line) and
-reports ``cost_<name>`` for each constraint the task declares (``constraints``).
-The episode terminates (discount 0) when a footprint check point leaves the road, the chassis
-touches an obstacle or the physics diverges; the 512-step time limit is a truncation.
+step that ends in a collision or a road departure; 1 on a step that crosses a lane line outside
+intersections) and reports ``cost_<name>`` for each constraint the task declares
+(``constraints``). The episode terminates (discount 0) when a footprint check point leaves the
+road (also past a dead end of an open road), the chassis touches an obstacle or the physics
+diverges; the 512-step time limit is a truncation.
 """
 
 from __future__ import annotations
@@ -128,6 +129,8 @@ class LaneKeeping(base.Task):
         """The running episode's state."""
         self.obstacles = obstacle_index(self.map)
         """The map's obstacles in the lane frame (state features and encounter spawns)."""
+        self._colliding = tuple(obj for obj in self.map.objects if obj.collidable)
+        """The map's objects the robot collides with."""
         self._lane_lines = (-LANE_OFFSET, white_lateral(self.map.tile_size))
         """Lateral offsets (m) of the yellow centre line and the white edge line."""
         self._blocking = [(lane, o) for lane in self.map.lanes
@@ -210,9 +213,9 @@ class LaneKeeping(base.Task):
 
     def _spawn_is_clear(self, x: float, y: float, yaw: float) -> bool:
         """On the road, and the footprint at least ``spawn.obstacle_clearance`` from every
-        obstacle's footprint."""
+        footprint of an object the robot collides with."""
         clearance = self.config.spawn.obstacle_clearance
-        if any(_footprint_gap(obj, x, y, yaw) < clearance for obj in self.map.objects):
+        if any(_footprint_gap(obj, x, y, yaw) < clearance for obj in self._colliding):
             return False
         return self.map.all_road(check_points(x, y, yaw))
 
@@ -239,8 +242,9 @@ class LaneKeeping(base.Task):
             termination = "off_road"
         elif physics.touches_obstacle():
             termination = "collision"
-            self.episode.hit_object = min(range(len(self.map.objects)), key=lambda k: (
-                _footprint_gap(self.map.objects[k], x, y, yaw)))
+            self.episode.hit_object = min(
+                (k for k, obj in enumerate(self.map.objects) if obj.collidable),
+                key=lambda k: _footprint_gap(self.map.objects[k], x, y, yaw))
         off_road = termination == "off_road" or not pose.on_road
         signals = {
             "lane_deviation": self.config.off_road_lane_cost if off_road
@@ -257,8 +261,11 @@ class LaneKeeping(base.Task):
 
     def _crosses_line(self, before: StepOutcome, after: LanePose) -> bool:
         """Whether the robot's centre went from one side of a lane line to the other (both
-        poses on the road)."""
+        poses on the road and off intersections, where no lane lines are painted)."""
         if not (before.on_road and after.on_road):
+            return False
+        if any(self.map.tile(lane.column, lane.row).intersection
+               for lane in (self.map.lanes[before.lane], after.lane)):
             return False
         return any((before.lateral - line) * (after.lateral - line) < 0.0
                    for line in self._lane_lines)
