@@ -14,7 +14,10 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 os.environ.setdefault("PYOPENGL_PLATFORM", os.environ["MUJOCO_GL"])
 
 from crllk import maps
+from crllk.errors import show_map_warnings_on_one_line
 from crllk.tasks.lane_keeping import load
+
+show_map_warnings_on_one_line()
 
 __all__ = ["load", "make_env", "maps"]
 

@@ -3,8 +3,12 @@
 from __future__ import annotations
 
 import argparse
+import os
 import sys
+from collections.abc import Callable
 from typing import NoReturn
+
+from crllk.errors import ConfigError
 
 
 class Parser(argparse.ArgumentParser):
@@ -15,15 +19,66 @@ class Parser(argparse.ArgumentParser):
         raise SystemExit(2)
 
 
-def positive_int(text: str) -> int:
-    """A whole number above zero (an argparse ``type``)."""
+def _whole_number_at_least(text: str, least: int) -> int:
     try:
         value = int(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be at least 1, got {value}")
+    if value < least:
+        raise argparse.ArgumentTypeError(f"must be at least {least}, got {value}")
     return value
+
+
+def positive_int(text: str) -> int:
+    """A whole number above zero (an argparse ``type``)."""
+    return _whole_number_at_least(text, 1)
+
+
+def non_negative_int(text: str) -> int:
+    """A whole number of at least zero (an argparse ``type``)."""
+    return _whole_number_at_least(text, 0)
+
+
+DEBUG_VARIABLE = "CRLLK_DEBUG"
+"""Set (``CRLLK_DEBUG=1``) to see the traceback of an error instead of its one line."""
+
+
+def run(main: Callable[[], object]) -> NoReturn:
+    """Runs a command's ``main`` and exits with its status (:func:`exit_status`)."""
+    raise SystemExit(exit_status(main))
+
+
+def exit_status(main: Callable[[], object]) -> int:
+    """Calls ``main``; its status (an int it returns, else 0). Bad input (a
+    :class:`~crllk.errors.ConfigError`, or a file that cannot be read or written) is one line
+    and status 2, any other error one line naming it and status 1; the traceback only with
+    ``CRLLK_DEBUG=1``."""
+    debug = os.environ.get(DEBUG_VARIABLE, "") not in ("", "0")
+    try:
+        status = main()
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return 130
+    except (ConfigError, OSError) as err:
+        if debug:
+            raise
+        print(f"error: {one_line(err)}", file=sys.stderr)
+        return 2
+    except Exception as err:
+        if debug:
+            raise
+        print(f"error: {type(err).__name__}: {one_line(err)} ({DEBUG_VARIABLE}=1 shows where)",
+              file=sys.stderr)
+        return 1
+    return status if isinstance(status, int) and not isinstance(status, bool) else 0
+
+
+def one_line(err: BaseException) -> str:
+    """An exception's message on one line (an OSError as ``<file>: <reason>``)."""
+    if isinstance(err, OSError) and err.strerror:
+        where = f"{err.filename}: " if err.filename else ""
+        return f"{where}{err.strerror}"
+    return " ".join(str(err).split()) or type(err).__name__
 
 
 def fail(problem: object) -> NoReturn:

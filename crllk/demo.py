@@ -6,35 +6,40 @@ it achieved, write pictures and standalone MJCF scenes.
 
 from __future__ import annotations
 
-import argparse
 import time
 from collections.abc import Sequence
 from pathlib import Path
 
-from crllk.analysis.pictures import DEFAULT_MAPS, write_pictures
+from crllk.analysis.pictures import DEFAULT_MAPS, picture_stem, write_pictures
+from crllk.cli import Parser, non_negative_int, positive_int, run
 from crllk.maps import load_map
 from crllk.sim.scene import export_scene
+from crllk.tasks.config import load_task_config
 
 
 def main(argv: Sequence[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = Parser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, default=Path("outputs/demo"))
-    parser.add_argument("--maps", nargs="+", default=list(DEFAULT_MAPS))
-    parser.add_argument("--steps", type=int, default=512)
-    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--maps", nargs="+", default=list(DEFAULT_MAPS),
+                        help="task names or paths of task or map files")
+    parser.add_argument("--steps", type=positive_int, default=512)
+    parser.add_argument("--seed", type=non_negative_int, default=0)
     args = parser.parse_args(argv)
+    for task in args.maps:
+        load_task_config(task)  # a bad task or map file ends here, before any picture
     print(f"{'map':<15}{'steps':>6}{'distance m':>12}{'lane cost dm':>14}{'collisions':>12}"
           f"  {'ended by':<10}{'steps/s':>8}")
     for task in args.maps:
         start = time.perf_counter()
-        run = write_pictures(task, args.out, args.steps, args.seed)
-        rate = run["steps"] / (time.perf_counter() - start)
-        print(f"{task:<15}{run['steps']:>6}{run['distance']:>12.2f}{run['lane_cost']:>14.3f}"
-              f"{run['collisions']:>12.0f}  {run['termination'] or 'time limit':<10}{rate:>8.0f}")
+        result = write_pictures(task, args.out, args.steps, args.seed)
+        rate = result["steps"] / (time.perf_counter() - start)
+        print(f"{picture_stem(task):<15}{result['steps']:>6}{result['distance']:>12.2f}"
+              f"{result['lane_cost']:>14.3f}{result['collisions']:>12.0f}  "
+              f"{result['termination'] or 'time limit':<10}{rate:>8.0f}")
         export_scene(load_map(task), args.out / "mjcf")
     print(f"pictures: {args.out}/*.png; scenes: python -m mujoco.viewer "
           f"--mjcf={args.out}/mjcf/<map>.xml")
 
 
 if __name__ == "__main__":
-    main()
+    run(main)

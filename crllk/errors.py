@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import sys
+import warnings
 from pathlib import Path
 
 
@@ -29,6 +31,23 @@ class MapWarning(UserWarning):
     def __init__(self, source: str | Path, field: str, problem: str) -> None:
         self.source, self.field, self.problem = str(source), field, problem
         super().__init__(f"{self.source}: {field}: {problem}")
+
+
+def show_map_warnings_on_one_line() -> None:
+    """Prints each :class:`MapWarning` as one line, ``warning: <source>: <field>: <what>``,
+    without the source line Python adds; other warnings are shown as before."""
+    shown = warnings.showwarning
+    if getattr(shown, "one_line_map_warnings", False):
+        return
+
+    def show(message, category, filename, lineno, file=None, line=None) -> None:
+        if issubclass(category, MapWarning):
+            print(f"warning: {message}", file=sys.stderr if file is None else file)
+        else:
+            shown(message, category, filename, lineno, file, line)
+
+    show.one_line_map_warnings = True  # type: ignore[attr-defined]
+    warnings.showwarning = show
 
 
 class RecordingError(ConfigError):

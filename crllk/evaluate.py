@@ -30,10 +30,11 @@ from typing import Any
 
 import torch
 
+from crllk.cli import run
 from crllk.errors import ConfigError
 from crllk.evaluation.report import aggregate, format_aggregate, format_summary
 from crllk.evaluation.runs import evaluate_follower, evaluate_run, record_run
-from crllk.files import atomic_write_text
+from crllk.files import atomic_write_text, write_problem
 from crllk.settings import at_least_one, non_negative, one_of, parse_dotlist, setting
 from crllk.training.config import EVALUATION_SEED, algo_thresholds
 
@@ -79,6 +80,9 @@ class EvaluateConfig:
         for run_dir in self.run_dirs():
             if not run_dir.is_dir():
                 yield "run", f"no such run directory: {run_dir}"
+        problem = write_problem(self.out) if self.out else None
+        if problem:
+            yield "out", problem
 
 
 # ----- one evaluation ----------------------------------------------------------------------
@@ -128,4 +132,4 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    run(main)

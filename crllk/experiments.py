@@ -18,7 +18,6 @@ later invocation even where its checkpoint is gone.
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import platform
@@ -32,12 +31,17 @@ from typing import Any
 
 import torch
 
+from crllk.cli import Parser, run
+from crllk.errors import ConfigError
 from crllk.evaluation.report import PAPER_CONSTRAINTS, aggregate
 from crllk.evaluation.runs import evaluate_follower
-from crllk.files import atomic_write_text
-from crllk.training.config import EVALUATION_SEED, algo_thresholds
+from crllk.files import atomic_write_text, write_problem
+from crllk.training.compose import compose_config
+from crllk.training.config import EVALUATION_SEED, algo_thresholds, validate
 from crllk.training.runs import CHECKPOINT_FILE, EVAL_FILE, read_eval_json
 
+SOURCE = "experiments"
+"""How errors name where a bad option came from."""
 THRESHOLDS = {c["name"]: algo_thresholds()[c["name"]] for c in PAPER_CONSTRAINTS}
 """alpha_1 (dm) and alpha_2 (collisions per episode) of the paper's Table 1: ``algo=crllk``'s."""
 AGENTS = {
@@ -536,8 +540,25 @@ ALL = ("table1", "maps", "figure1")
 """What ``all`` runs (the sweep is asked for by name)."""
 
 
+def check_settings(settings: Settings) -> None:
+    """Checks, before any run starts, that every agent's trainer configuration composes with
+    the ``--set`` overrides and that the runs and results folders can be written.
+
+    Raises:
+        ConfigError: naming the override or the folder.
+    """
+    for agent in settings.agents:
+        overrides = [*AGENTS[agent], f"obs={settings.obs}", f"seed={min(settings.seeds)}",
+                     f"total_frames={settings.frames}", *settings.train_overrides]
+        validate(compose_config(overrides))
+    for option, folder in (("--runs-root", settings.runs_root), ("--results", settings.results)):
+        problem = write_problem(folder / "probe")
+        if problem:
+            raise ConfigError(SOURCE, option, problem)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = Parser(description=__doc__.splitlines()[0])
     parser.add_argument("experiment", choices=[*EXPERIMENTS, "all"])
     parser.add_argument("--frames", type=int, default=None,
                         help=f"environment frames per training run (pixels: {PIXEL_FRAMES:,}, "
@@ -576,6 +597,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                         sweep_tasks=tuple(args.sweep_tasks),
                         lane_weights=tuple(args.lane_weights),
                         collision_weights=tuple(args.collision_weights))
+    check_settings(settings)
     names = list(ALL) if args.experiment == "all" else [args.experiment]
     try:
         for name in names:
@@ -587,4 +609,4 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    run(main)

@@ -5,25 +5,33 @@
 
 from __future__ import annotations
 
-import argparse
 from collections.abc import Sequence
 from pathlib import Path
 
-from crllk.analysis.pictures import DEFAULT_MAPS, write_pictures
+from crllk.analysis.pictures import DEFAULT_MAPS, picture_stem, write_pictures
+from crllk.cli import Parser, fail, non_negative_int, positive_int, run
+from crllk.files import write_problem
+from crllk.tasks.config import load_task_config
 
 
 def main(argv: Sequence[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = Parser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, default=Path("outputs/pictures"))
-    parser.add_argument("--maps", nargs="+", default=list(DEFAULT_MAPS))
-    parser.add_argument("--steps", type=int, default=512)
-    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--maps", nargs="+", default=list(DEFAULT_MAPS),
+                        help="task names or paths of task or map files")
+    parser.add_argument("--steps", type=positive_int, default=512)
+    parser.add_argument("--seed", type=non_negative_int, default=0)
     args = parser.parse_args(argv)
+    problem = write_problem(args.out / "probe.png")
+    if problem:
+        fail(f"--out: {problem}")
     for task in args.maps:
-        run = write_pictures(task, args.out, args.steps, args.seed)
-        print(f"{task}: {run['steps']} steps, {run['distance']:.2f} m, "
-              f"lane cost {run['lane_cost']:.3f} dm -> {args.out}/{task}_*.png")
+        load_task_config(task)  # a bad task or map file ends here, before any picture
+    for task in args.maps:
+        result = write_pictures(task, args.out, args.steps, args.seed)
+        print(f"{task}: {result['steps']} steps, {result['distance']:.2f} m, lane cost "
+              f"{result['lane_cost']:.3f} dm -> {args.out}/{picture_stem(task)}_*.png")
 
 
 if __name__ == "__main__":
-    main()
+    run(main)

@@ -13,8 +13,9 @@ from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 
-from crllk.cli import Parser, fail, positive_int
+from crllk.cli import Parser, fail, positive_int, run
 from crllk.errors import ConfigError
+from crllk.files import write_problem
 from crllk.recording.recorder import VIEWERS, RecordingReport, record_episodes
 from crllk.tasks.follower import FollowerPolicy
 
@@ -68,6 +69,9 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser.add_argument("--compare", action="store_true",
                         help="also time the same episodes unrecorded")
     args = parser.parse_args(argv)
+    problem = write_problem(args.out)
+    if problem:
+        fail(f"{args.out}: --out: {problem}")
     try:
         with _follower_env(args) as env:
             start = time.perf_counter()
@@ -82,4 +86,4 @@ def main(argv: Sequence[str] | None = None) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run(main)

@@ -24,10 +24,11 @@ import time
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import NoReturn
 
 from rerun.experimental import ViewerClient
 
+from crllk.cli import Parser, run
+from crllk.errors import ConfigError
 from crllk.recording.viewer import (
     VIEWER_HOST,
     free_port,
@@ -266,16 +267,16 @@ def check_recording(path: Path) -> Path:
     """The absolute path of a readable rerun recording.
 
     Raises:
-        ScreenshotError: if ``path`` is missing, unreadable or not an ``.rrd`` file.
+        ConfigError: if ``path`` is missing, unreadable or not an ``.rrd`` file.
     """
     path = Path(path).expanduser().resolve()
     try:
         with path.open("rb") as handle:
             magic = handle.read(len(_MAGIC))
     except OSError as err:
-        raise ScreenshotError(f"cannot read {path}: {err.strerror or err}") from None
+        raise ConfigError(path, "recording", f"cannot read: {err.strerror or err}") from None
     if magic != _MAGIC:
-        raise ScreenshotError(f"{path} is not a rerun recording (.rrd)")
+        raise ConfigError(path, "recording", "not a rerun recording (.rrd)")
     return path
 
 
@@ -283,7 +284,7 @@ def check_out_dir(out_dir: Path) -> Path:
     """``out_dir``, created; absolute (the viewer process writes nothing, this one does).
 
     Raises:
-        ScreenshotError: if it cannot be created or written.
+        ConfigError: if it cannot be created or written.
     """
     out_dir = Path(out_dir).expanduser().resolve()
     try:
@@ -291,8 +292,8 @@ def check_out_dir(out_dir: Path) -> Path:
         with tempfile.TemporaryFile(dir=out_dir):
             pass
     except OSError as err:
-        raise ScreenshotError(f"cannot write pictures to {out_dir}: "
-                              f"{err.strerror or err}") from None
+        raise ConfigError(out_dir, "--out", f"cannot write pictures here: "
+                          f"{err.strerror or err}") from None
     return out_dir
 
 
@@ -317,15 +318,8 @@ def _time(text: str) -> float:
 
 
 # ----- command line -----------------------------------------------------------------------
-class _Parser(argparse.ArgumentParser):
-    """Bad arguments are one line on stderr (exit status 2)."""
-
-    def error(self, message: str) -> NoReturn:
-        self.exit(2, f"error: {message} (see --help)\n")
-
-
 def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
-    parser = _Parser(
+    parser = Parser(
         prog="python -m crllk.screenshots",
         description="Screenshots of the real rerun viewer, taken headless.")
     parser.add_argument("recording", nargs="?", type=Path, help="a .rrd file")
@@ -375,4 +369,4 @@ __all__ = ["WINDOW_SIZE", "ScreenshotError", "ViewProblem", "check_out_dir", "ch
 
 
 if __name__ == "__main__":
-    main()
+    run(main)

@@ -17,7 +17,7 @@ from collections.abc import Callable, Iterable, Mapping
 from typing import Any, TypeVar
 
 from omegaconf import MISSING, OmegaConf
-from omegaconf.errors import OmegaConfBaseException
+from omegaconf.errors import ConfigKeyError, OmegaConfBaseException
 
 from crllk.errors import ConfigError
 
@@ -77,6 +77,9 @@ def parse(schema: type[Settings], values: Any, source: str) -> Settings:
     try:
         merged = OmegaConf.merge(OmegaConf.structured(schema), values)
         settings: Settings = OmegaConf.to_object(merged)  # type: ignore[assignment]
+    except ConfigKeyError as err:
+        key = getattr(err, "full_key", None) or "<input>"
+        raise ConfigError(source, str(key), "no such setting") from None
     except OmegaConfBaseException as err:
         key = getattr(err, "full_key", None) or "<input>"
         raise ConfigError(source, str(key), str(err).splitlines()[0]) from None

@@ -15,6 +15,7 @@ import hydra
 from omegaconf import DictConfig, OmegaConf
 
 import crllk  # noqa: F401  (chooses the headless GL backend before torchrl imports mujoco)
+from crllk.cli import exit_status
 from crllk.errors import ConfigError
 from crllk.training.compose import compose_config, register, task_paths_as_task_file
 from crllk.training.config import TrainConfig, upgrade, validate
@@ -45,11 +46,9 @@ register()
 
 @hydra.main(version_base="1.3", config_path="conf", config_name="train")
 def main(cfg: DictConfig) -> None:
-    try:
-        train(resolve_config(cfg))
-    except ConfigError as err:
-        print(f"error: {err}", file=sys.stderr)
-        raise SystemExit(2) from None
+    status = exit_status(lambda: train(resolve_config(cfg)))
+    if status:
+        raise SystemExit(status)
 
 
 def check_overrides(argv: list[str]) -> None:

@@ -13,7 +13,7 @@ import crllk
 PACKAGE = Path(crllk.__file__).parent
 
 LAYERS = (
-    ("crllk.errors", "crllk.files", "crllk.paths", "crllk.settings"),
+    ("crllk.errors", "crllk.files", "crllk.paths", "crllk.settings", "crllk.cli"),
     ("crllk.maps",),
     ("crllk.sim",),
     ("crllk.tasks",),
@@ -24,7 +24,7 @@ LAYERS = (
     ("crllk.evaluation",),
     ("crllk.analysis",),
     ("crllk.train", "crllk.evaluate", "crllk.record", "crllk.experiments", "crllk.pictures",
-     "crllk.screenshots", "crllk.demo", "crllk.bench", "crllk.cli"),
+     "crllk.screenshots", "crllk.demo", "crllk.bench"),
 )
 """Bottom to top, in the order data flows: maps, MuJoCo, dm-control tasks, TorchRL
 environments, learning, recording, the trainer, evaluation of runs, analysis, commands."""

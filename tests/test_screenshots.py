@@ -10,6 +10,7 @@ from pathlib import Path
 import pytest
 
 from crllk import screenshots
+from crllk.cli import exit_status
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -24,14 +25,16 @@ def no_viewer(monkeypatch):
 
 
 def run_main(argv: list[str], capsys) -> tuple[int | str | None, str]:
-    with pytest.raises(SystemExit) as exit_info:
-        screenshots.main(argv)
-    return exit_info.value.code, capsys.readouterr().err
+    try:
+        code = exit_status(lambda: screenshots.main(argv))
+    except SystemExit as exit_info:  # argument errors
+        code = exit_info.code
+    return code, capsys.readouterr().err
 
 
 @pytest.mark.parametrize(("argv", "message"), [
     (["{missing}", "--out", "{out}"], "cannot read"),
-    (["{not_rrd}", "--out", "{out}"], "is not a rerun recording"),
+    (["{not_rrd}", "--out", "{out}"], "recording: not a rerun recording"),
     (["{rrd}", "--out", "{file}"], "cannot write pictures"),
     (["{rrd}", "--out", "{out}", "--times", "abc"], "expected a number"),
     (["{rrd}", "--out", "{out}", "--times", "-1"], "must be finite and >= 0"),
@@ -58,5 +61,6 @@ def test_command_line_fails_without_a_traceback(tmp_path):
     result = subprocess.run([sys.executable, "-m", "crllk.screenshots", str(tmp_path / "no.rrd"),
                              "--out", str(tmp_path)], cwd=REPO, capture_output=True, text=True,
                             timeout=120)
-    assert result.returncode == 1
-    assert result.stderr.startswith("error: cannot read") and "Traceback" not in result.stderr
+    assert result.returncode == 2
+    assert result.stderr.startswith("error: ") and "recording: cannot read" in result.stderr
+    assert "Traceback" not in result.stderr

@@ -79,16 +79,23 @@ def drive(task: str, steps: int, seed: int = 0, snapshots: int = 4) -> dict:
             "collisions": collisions, "termination": env.task.outcome.termination}
 
 
+def picture_stem(task: str) -> str:
+    """How a task's pictures are named: the task's name, or the stem of its file."""
+    return Path(task).stem if task.endswith((".yaml", ".yml")) else task
+
+
 def write_pictures(task: str, out: Path, steps: int = 512, seed: int = 0) -> dict:
-    """Drive ``task`` and write ``<task>_topdown.png``, ``<task>_camera.png`` (policy
-    resolution), ``<task>_camera_full.png`` and ``<task>_chase.png`` into ``out``."""
+    """Drive ``task`` (a name or the path of a task or map file) and write
+    ``<stem>_topdown.png``, ``<stem>_camera.png`` (policy resolution), ``<stem>_camera_full.png``
+    and ``<stem>_chase.png`` into ``out`` (:func:`picture_stem`)."""
     out.mkdir(parents=True, exist_ok=True)
     run = drive(task, steps, seed)
     env = run["env"]
-    topdown(env.physics, env.task.map, run["trail"]).save(out / f"{task}_topdown.png")
-    camera_strip(run["frames"]).save(out / f"{task}_camera.png")
-    camera_strip(run["full_frames"], scale=1).save(out / f"{task}_camera_full.png")
+    stem = picture_stem(task)
+    topdown(env.physics, env.task.map, run["trail"]).save(out / f"{stem}_topdown.png")
+    camera_strip(run["frames"]).save(out / f"{stem}_camera.png")
+    camera_strip(run["full_frames"], scale=1).save(out / f"{stem}_camera_full.png")
     Image.fromarray(env.physics.render_camera(360, 480, camera=C.CHASE_CAMERA)).save(
-        out / f"{task}_chase.png")
+        out / f"{stem}_chase.png")
     env.physics.free_renderers()
     return run

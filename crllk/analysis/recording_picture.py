@@ -10,7 +10,6 @@ Everything drawn comes from the file (``rerun.chunk.RrdReader``): the static map
 
 from __future__ import annotations
 
-import argparse
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -23,6 +22,9 @@ import numpy as np
 import pyarrow as pa
 from matplotlib.patches import Polygon
 
+from crllk.cli import Parser, run
+from crllk.errors import ConfigError
+from crllk.files import write_problem
 from crllk.recording import entities as R
 from crllk.recording.recorder import read_recording
 
@@ -211,11 +213,16 @@ def draw_recording(path: str | Path, out: str | Path, title: str | None = None) 
 
 
 def main(argv: Sequence[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(description="Draw a picture of a crllk rerun recording.")
+    parser = Parser(description="Draw a picture of a crllk rerun recording.")
     parser.add_argument("recording", type=Path)
     parser.add_argument("--out", type=Path, default=Path("docs/images/recording.png"))
     parser.add_argument("--title", default=None)
     args = parser.parse_args(argv)
+    if not args.recording.is_file():
+        raise ConfigError(args.recording, "recording", "no such file")
+    problem = write_problem(args.out)
+    if problem:
+        raise ConfigError(args.out, "--out", problem)
     print(draw_recording(args.recording, args.out, args.title))
 
 
@@ -224,4 +231,4 @@ __all__ = ["Series", "draw_recording", "images", "positions", "scalars", "series
 
 
 if __name__ == "__main__":
-    main()
+    run(main)

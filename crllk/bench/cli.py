@@ -21,7 +21,7 @@ from crllk.bench.rates import (
     raw_render_rate,
     time_to_constraints,
 )
-from crllk.cli import Parser, fail, positive_int
+from crllk.cli import Parser, fail, positive_int, run
 from crllk.errors import ConfigError
 from crllk.tasks.config import load_task_config
 
@@ -84,4 +84,4 @@ def main(argv: Sequence[str] | None = None) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run(main)

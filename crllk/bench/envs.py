@@ -11,13 +11,13 @@ of the targets (state >= 0.5, pixels >= 0.6).
 
 from __future__ import annotations
 
-import argparse
 import time
 from collections.abc import Sequence
 
 import torch
 
 from crllk.bench.rates import raw_physics_rate, raw_render_rate
+from crllk.cli import Parser, positive_int, run
 from crllk.envs.batched import make_env
 
 _WARMUP_STEPS = 10
@@ -45,10 +45,10 @@ def batched_env_rate(task: str, observation: str, num_envs: int, steps: int,
 
 
 def main(argv: Sequence[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = Parser(description=__doc__.splitlines()[0])
     parser.add_argument("--task", default="small_loop")
-    parser.add_argument("--steps", type=int, default=300, help="batched steps per figure")
-    parser.add_argument("--num-envs", type=int, nargs="+", default=[1, 8, 32])
+    parser.add_argument("--steps", type=positive_int, default=300, help="batched steps per figure")
+    parser.add_argument("--num-envs", type=positive_int, nargs="+", default=[1, 8, 32])
     parser.add_argument("--observations", nargs="+", default=["state", "pixels"],
                         choices=["state", "pixels"])
     args = parser.parse_args(argv)
@@ -68,4 +68,4 @@ def main(argv: Sequence[str] | None = None) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run(main)

@@ -13,7 +13,6 @@ iteration's row goes to the live view and one evaluation recording is forwarded 
 
 from __future__ import annotations
 
-import argparse
 import statistics
 import sys
 import tempfile
@@ -24,6 +23,7 @@ from pathlib import Path
 
 import crllk  # noqa: F401  (headless GL before torchrl)
 from crllk.bench.training import bench_config
+from crllk.cli import Parser, positive_int, run
 from crllk.envs.episodes import EpisodeAccumulator
 from crllk.recording.live import LiveView, live_url, server_sink
 from crllk.recording.recorder import record_episodes
@@ -113,9 +113,9 @@ def _evaluation_recording(config: TrainConfig, learner: Learner, path: Path) -> 
 
 
 def main(argv: Sequence[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--iterations", type=int, default=4, help="iterations per block")
-    parser.add_argument("--repetitions", type=int, default=6, help="blocks of each kind")
+    parser = Parser(description=__doc__.splitlines()[0])
+    parser.add_argument("--iterations", type=positive_int, default=4, help="iterations per block")
+    parser.add_argument("--repetitions", type=positive_int, default=6, help="blocks of each kind")
     parser.add_argument("--viewer", action="store_true",
                         help="connect a headless viewer to the live view")
     parser.add_argument("overrides", nargs="*", default=["obs=state"],
@@ -134,4 +134,4 @@ def main(argv: Sequence[str] | None = None) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run(main)

@@ -39,6 +39,10 @@ MAX_MAP_TILES = 1024
 0.5 GB at the limit."""
 MAX_MAP_SIDE = 64
 """Most rows, and most columns, a map may have (the longest Duckietown map is 36 tiles)."""
+TILE_SIZE_RANGE = (0.3, 3.0)
+"""Tile pitches a map may have (m); Duckietown's is 0.585. Below about 0.23 m the inner edge
+of a right turn's lane has a negative radius; at 3 m a map of :data:`MAX_MAP_SIDE` tiles
+(192 m) still fits the overhead camera's frame (about 240 m)."""
 MAX_MAP_OBJECTS = 1000
 """Most objects a map may list (before AprilTags are left out); the largest Duckietown maps
 list under 150."""
@@ -103,6 +107,9 @@ def parse_map(data: Any, *, name: str, source: str | Path, field_prefix: str = "
     if "tile_size" not in data:
         raise MapError(source, f"{field_prefix}tile_size", "missing (the tile pitch in metres)")
     tile_size = _positive_number(data["tile_size"], source, f"{field_prefix}tile_size")
+    if not TILE_SIZE_RANGE[0] <= tile_size <= TILE_SIZE_RANGE[1]:
+        raise MapError(source, f"{field_prefix}tile_size", f"must lie in [{TILE_SIZE_RANGE[0]}, "
+                       f"{TILE_SIZE_RANGE[1]}] m (Duckietown's is 0.585), got {tile_size:g}")
     _check_limits(data, source, field_prefix)
     tiles = _parse_tiles(data.get("tiles"), source, f"{field_prefix}tiles")
     objects = parse_objects(data.get("objects"), tile_size=tile_size, rows=len(tiles),

@@ -31,7 +31,14 @@ def save_checkpoint(path: str | Path, state: dict[str, Any]) -> Path:
 def load_checkpoint(path: str | Path) -> dict[str, Any]:
     """Loads a checkpoint written by :func:`save_checkpoint`."""
     path = Path(path)
-    state = torch.load(path, map_location="cpu", weights_only=False)
+    try:
+        state = torch.load(path, map_location="cpu", weights_only=False)
+    except OSError as err:
+        raise ConfigError(path, "<file>", f"cannot read: {err.strerror or err}") from None
+    except Exception as err:  # torch raises RuntimeError, pickle errors, EOFError...
+        reason = str(err).splitlines()[0] if str(err) else type(err).__name__
+        raise ConfigError(path, "<file>", f"not a readable checkpoint (damaged or truncated: "
+                          f"{reason})") from None
     if not isinstance(state, dict) or "format" not in state:
         raise ConfigError(path, "format", "not a crllk checkpoint")
     if state["format"] != CHECKPOINT_FORMAT:

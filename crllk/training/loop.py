@@ -61,10 +61,14 @@ def train(config: TrainConfig) -> Path:
     """Trains (or resumes) one run; returns its directory."""
     run_dir = config.resolved_run_dir()
     checkpoint_path = run_dir / "checkpoints" / "last.pt"
-    resuming = prepare_run_dir(config, run_dir, checkpoint_path)
     env, learner, multipliers, generator = build_run(config)
     constraints = env.constraints
     lock = lock_run_dir(run_dir)
+    try:
+        resuming = prepare_run_dir(config, run_dir, checkpoint_path)
+    except ConfigError:
+        lock.close()
+        raise
     episodes = EpisodeAccumulator(config.num_envs, constraints)
     metrics = CsvLog(run_dir / "metrics.csv",
                      metric_columns(config.action.name, constraints, learner.loss.out_keys))
@@ -161,11 +165,14 @@ def learn(config: TrainConfig, env: BatchedLaneKeepingEnv, learner: Learner,
 
 def prepare_run_dir(config: TrainConfig, run_dir: Path, checkpoint_path: Path) -> bool:
     """Whether the run resumes from ``checkpoint_path``; clears the logs of a run killed
-    before its first checkpoint.
+    before its first checkpoint, and the temporary files of writes a kill interrupted (the
+    run's lock is held, so no other writer is at work).
 
     Raises:
         ConfigError: if ``run_dir`` holds a run and ``resume`` is off.
     """
+    for leftover in run_dir.glob(".*.tmp"):
+        leftover.unlink(missing_ok=True)
     resuming = config.resume and checkpoint_path.exists()
     if not resuming and (run_dir / "metrics.csv").exists():
         if not config.resume:

@@ -20,8 +20,14 @@ def lock_run_dir(run_dir: Path) -> io.TextIOWrapper:
     Raises:
         ConfigError: if another process holds the lock.
     """
-    run_dir.mkdir(parents=True, exist_ok=True)
-    handle = (run_dir / ".lock").open("w")
+    if run_dir.exists() and not run_dir.is_dir():
+        raise ConfigError(SOURCE_RUN, "run_dir", f"{run_dir} is a file, not a directory")
+    try:
+        run_dir.mkdir(parents=True, exist_ok=True)
+        handle = (run_dir / ".lock").open("w")
+    except OSError as err:
+        raise ConfigError(SOURCE_RUN, "run_dir", f"{run_dir}: cannot create or write the run "
+                          f"directory: {err.strerror or err}") from None
     try:
         fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
     except BlockingIOError:
