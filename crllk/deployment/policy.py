@@ -1,0 +1,73 @@
+"""The deterministic policy of a run as one network: an observation in, wheel duties out.
+
+The input is what the trained policy reads, without a batch dimension: one camera image as
+uint8 H×W×3 RGB (pixel runs) or the state features as float32 (state runs). The output is the
+two wheel duty cycles (left, right) as float32, through the run's own action mapping
+(:mod:`crllk.tasks.actions`), of the policy's deterministic action: the most probable of the
+three discrete actions, or tanh of the Gaussian mean for continuous actions (the mode of the
+squashed distribution's base, as TorchRL's deterministic exploration takes it).
+"""
+
+from __future__ import annotations
+
+import torch
+from torch import nn
+from torchrl.modules import ProbabilisticActor
+
+from crllk.tasks.actions import (
+    DISCRETE_DUTIES,
+    GAIN,
+    LIMIT,
+    MAX_DUTY_DIFFERENCE,
+    MAX_MEAN_DUTY,
+    MIN_MEAN_DUTY,
+    MOTOR_CONSTANT,
+    TRIM,
+)
+from crllk.sim.constants import WHEEL_DISTANCE, WHEEL_RADIUS
+
+EXPORTABLE_ACTIONS = ("discrete", "continuous", "duckietown")
+
+
+class DeployedPolicy(nn.Module):
+    """``forward(observation) -> duty[2]`` of a trained actor (see the module docstring)."""
+
+    def __init__(self, actor: ProbabilisticActor, action: str):
+        super().__init__()
+        if action not in EXPORTABLE_ACTIONS:
+            raise ValueError(f"action must be one of {EXPORTABLE_ACTIONS}, got {action!r}")
+        network = actor.module[0].module
+        if len(actor.module[0].in_keys) != 1:
+            raise ValueError("the policy reads its own recent commands (model.policy_commands); "
+                             "only policies that read the observation alone can be deployed")
+        self.network = network
+        self.action = action
+        self.register_buffer("discrete_duties", torch.tensor(DISCRETE_DUTIES,
+                                                             dtype=torch.float32))
+
+    def forward(self, observation: torch.Tensor) -> torch.Tensor:
+        batch = observation.unsqueeze(0)
+        if self.action == "discrete":
+            index = self.network(batch).argmax(dim=-1)
+            return self.discrete_duties[index[0]]
+        loc, _ = self.network(batch)
+        velocity, steering = torch.tanh(loc[0]).clamp(-1.0, 1.0).unbind(-1)
+        if self.action == "continuous":
+            return drive_turn_duties(velocity, steering)
+        return velocity_steering_duties(velocity, steering)
+
+
+def drive_turn_duties(velocity: torch.Tensor, steering: torch.Tensor) -> torch.Tensor:
+    """:func:`crllk.tasks.actions.drive_turn_duty` on tensors."""
+    mean = MIN_MEAN_DUTY + 0.5 * (velocity + 1.0) * (MAX_MEAN_DUTY - MIN_MEAN_DUTY)
+    half_difference = 0.5 * steering * MAX_DUTY_DIFFERENCE
+    return torch.stack([mean - half_difference, mean + half_difference])
+
+
+def velocity_steering_duties(velocity: torch.Tensor, steering: torch.Tensor) -> torch.Tensor:
+    """:func:`crllk.tasks.actions.velocity_steering_duty` on tensors."""
+    rate_right = (velocity + 0.5 * steering * WHEEL_DISTANCE) / WHEEL_RADIUS
+    rate_left = (velocity - 0.5 * steering * WHEEL_DISTANCE) / WHEEL_RADIUS
+    duty_left = rate_left * (GAIN - TRIM) / MOTOR_CONSTANT
+    duty_right = rate_right * (GAIN + TRIM) / MOTOR_CONSTANT
+    return torch.stack([duty_left, duty_right]).clamp(-LIMIT, LIMIT)
