@@ -13,6 +13,7 @@ import numpy as np
 
 import crllk
 from crllk.sim import constants as C
+from crllk.sim.physics import close_renderer
 from crllk.sim.scene import compile_scene
 from crllk.tasks.config import load_task_config
 
@@ -54,7 +55,7 @@ def raw_render_rate(task: str, steps: int) -> float:
         renderer.render()
 
     rate = _rate(step, steps)
-    renderer.close()
+    close_renderer(renderer)
     return rate
 
 

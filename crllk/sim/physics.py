@@ -36,7 +36,25 @@ def _track(renderer: mujoco.Renderer) -> None:
 def _close_open_renderers() -> None:
     for renderer in list(_OPEN_RENDERERS):
         with contextlib.suppress(Exception):  # exiting: nothing is left to report to
-            renderer.close()
+            close_renderer(renderer)
+
+
+def close_renderer(renderer: mujoco.Renderer) -> None:
+    """Closes ``renderer`` in its own GL context. ``mujoco.Renderer.close`` frees its textures
+    and buffers in whichever context is current, which, after another renderer has drawn, is
+    that renderer's: objects there with the same GL names are freed and its later images are
+    garbage. So a renderer is made current before it is closed, also when its Physics is
+    garbage-collected (:meth:`Physics._reload_from_data` registers the finaliser)."""
+    context = getattr(renderer, "_gl_context", None)  # private in mujoco; None when closed
+    if context is not None:
+        context.make_current()
+    renderer.close()
+
+
+def _close_renderers(renderers: dict[tuple[int, int], mujoco.Renderer]) -> None:
+    for renderer in renderers.values():
+        close_renderer(renderer)
+    renderers.clear()
 
 
 log = logging.getLogger(__name__)
@@ -101,6 +119,7 @@ class Physics(dm_mujoco.Physics):
         self.diverged = False
         """Whether the last :meth:`step` diverged (the state was reset)."""
         self._renderers: dict[tuple[int, int], mujoco.Renderer] = {}
+        weakref.finalize(self, _close_renderers, self._renderers)
         self._obstacle_geoms = np.array(
             [i for i in range(self.model.ngeom)
              if (self.model.id2name(i, "geom") or "").startswith(C.OBSTACLE_PREFIX)], dtype=int)
@@ -236,6 +255,4 @@ class Physics(dm_mujoco.Physics):
 
     def free_renderers(self) -> None:
         """Release the GL contexts of the kept renderers."""
-        for renderer in self._renderers.values():
-            renderer.close()
-        self._renderers.clear()
+        _close_renderers(self._renderers)
