@@ -22,9 +22,9 @@ LAYERS = (
     ("crllk.recording",),
     ("crllk.training",),
     ("crllk.evaluation",),
-    ("crllk.analysis",),
+    ("crllk.analysis", "crllk.deployment"),
     ("crllk.train", "crllk.evaluate", "crllk.record", "crllk.experiments", "crllk.pictures",
-     "crllk.screenshots", "crllk.demo", "crllk.bench"),
+     "crllk.screenshots", "crllk.demo", "crllk.bench", "crllk.export", "crllk.deploy"),
 )
 """Bottom to top, in the order data flows: maps, MuJoCo, dm-control tasks, TorchRL
 environments, learning, recording, the trainer, evaluation of runs, analysis, commands."""

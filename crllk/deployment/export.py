@@ -9,8 +9,11 @@ right wheel duty cycles in [-1, 1]). What the pilot needs to feed it is in the m
 
 from __future__ import annotations
 
-import io
+import contextlib
 import json
+import logging
+import warnings
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -22,7 +25,7 @@ from crllk.files import atomic_write
 from crllk.training.build import build_env
 from crllk.training.runs import load_actor, load_run_config
 
-OPSET = 17
+OPSET = 18
 INPUT, OUTPUT = "observation", "duty"
 METADATA_PREFIX = "crllk."
 
@@ -53,17 +56,31 @@ def example_observation(metadata: dict[str, Any]) -> torch.Tensor:
 
 def export_onnx(policy: DeployedPolicy, metadata: dict[str, Any], out: str | Path) -> Path:
     """Writes ``policy`` to ``out`` as ONNX, with ``metadata`` (atomically)."""
-    buffer = io.BytesIO()
-    with torch.no_grad():
-        torch.onnx.export(policy, (example_observation(metadata),), buffer,
-                          input_names=[INPUT], output_names=[OUTPUT], opset_version=OPSET,
-                          dynamo=False)
-    model = onnx.load_from_string(buffer.getvalue())
+    with torch.no_grad(), _quiet_exporter():
+        program = torch.onnx.export(policy, (example_observation(metadata),), dynamo=True,
+                                    input_names=[INPUT], output_names=[OUTPUT],
+                                    opset_version=OPSET, verbose=False)
+    model = program.model_proto
     for key, value in metadata.items():
         entry = model.metadata_props.add()
         entry.key, entry.value = METADATA_PREFIX + key, str(value)
     onnx.checker.check_model(model)
     return atomic_write(out, lambda handle: handle.write(model.SerializeToString()))
+
+
+@contextlib.contextmanager
+def _quiet_exporter() -> Iterator[None]:
+    """Silences the exporter's notes on operators this graph does not use (torchvision's) and
+    its deprecation warnings; errors still raise."""
+    logger = logging.getLogger("torch.onnx")
+    level = logger.level
+    logger.setLevel(logging.ERROR)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            yield
+    finally:
+        logger.setLevel(level)
 
 
 def export_run(run_dir: str | Path, out: str | Path | None = None) -> Path:

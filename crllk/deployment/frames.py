@@ -11,6 +11,8 @@ as 640×480 is (16×16 blocks), else PIL's box filter.
 from __future__ import annotations
 
 import io
+from collections.abc import Iterator
+from pathlib import Path
 
 import numpy as np
 from PIL import Image
@@ -66,3 +68,46 @@ def policy_image(frame: bytes | np.ndarray, size: tuple[int, int] = POLICY_IMAGE
         factor = rows // height
         return box_average(np.ascontiguousarray(image), factor) if factor > 1 else image.copy()
     return np.asarray(Image.fromarray(image).resize((width, height), Image.Resampling.BOX))
+
+
+IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png")
+VIDEO_SUFFIXES = (".mp4", ".avi", ".mkv", ".mov", ".webm")
+
+
+def read_frames(path: str | Path) -> Iterator[tuple[str, bytes | np.ndarray]]:
+    """Named frames from a folder of images (their bytes, in name order: JPEG files reach the
+    pilot as the camera's messages do) or from a video (RGB arrays).
+
+    Raises:
+        ConfigError: for a missing path, a folder without images or an unreadable video.
+    """
+    path = Path(path)
+    if path.is_dir():
+        files = sorted(p for p in path.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES)
+        if not files:
+            raise ConfigError(path, "frames", f"no images ({', '.join(IMAGE_SUFFIXES)})")
+        for file in files:
+            yield file.name, file.read_bytes()
+        return
+    if not path.is_file():
+        raise ConfigError(path, "frames", "no such folder or video")
+    if path.suffix.lower() not in VIDEO_SUFFIXES:
+        raise ConfigError(path, "frames", f"not a folder of images or a video "
+                          f"({', '.join(VIDEO_SUFFIXES)})")
+    import cv2  # OpenCV reads videos; frames come out BGR
+
+    video = cv2.VideoCapture(str(path))
+    if not video.isOpened():
+        raise ConfigError(path, "frames", "cannot read the video")
+    try:
+        index = 0
+        while True:
+            ok, frame = video.read()
+            if not ok:
+                break
+            yield f"{path.name}#{index}", cv2.cvtColor(frame, cv2.COLOR_BGR2RGB)
+            index += 1
+    finally:
+        video.release()
+    if index == 0:
+        raise ConfigError(path, "frames", "the video has no frames")

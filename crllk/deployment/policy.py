@@ -14,17 +14,8 @@ import torch
 from torch import nn
 from torchrl.modules import ProbabilisticActor
 
-from crllk.tasks.actions import (
-    DISCRETE_DUTIES,
-    GAIN,
-    LIMIT,
-    MAX_DUTY_DIFFERENCE,
-    MAX_MEAN_DUTY,
-    MIN_MEAN_DUTY,
-    MOTOR_CONSTANT,
-    TRIM,
-)
 from crllk.sim.constants import WHEEL_DISTANCE, WHEEL_RADIUS
+from crllk.tasks import actions
 
 EXPORTABLE_ACTIONS = ("discrete", "continuous", "duckietown")
 
@@ -42,7 +33,7 @@ class DeployedPolicy(nn.Module):
                              "only policies that read the observation alone can be deployed")
         self.network = network
         self.action = action
-        self.register_buffer("discrete_duties", torch.tensor(DISCRETE_DUTIES,
+        self.register_buffer("discrete_duties", torch.tensor(actions.DISCRETE_DUTIES,
                                                              dtype=torch.float32))
 
     def forward(self, observation: torch.Tensor) -> torch.Tensor:
@@ -59,8 +50,9 @@ class DeployedPolicy(nn.Module):
 
 def drive_turn_duties(velocity: torch.Tensor, steering: torch.Tensor) -> torch.Tensor:
     """:func:`crllk.tasks.actions.drive_turn_duty` on tensors."""
-    mean = MIN_MEAN_DUTY + 0.5 * (velocity + 1.0) * (MAX_MEAN_DUTY - MIN_MEAN_DUTY)
-    half_difference = 0.5 * steering * MAX_DUTY_DIFFERENCE
+    low, high = actions.MIN_MEAN_DUTY, actions.MAX_MEAN_DUTY
+    mean = low + 0.5 * (velocity + 1.0) * (high - low)
+    half_difference = 0.5 * steering * actions.MAX_DUTY_DIFFERENCE
     return torch.stack([mean - half_difference, mean + half_difference])
 
 
@@ -68,6 +60,6 @@ def velocity_steering_duties(velocity: torch.Tensor, steering: torch.Tensor) -> 
     """:func:`crllk.tasks.actions.velocity_steering_duty` on tensors."""
     rate_right = (velocity + 0.5 * steering * WHEEL_DISTANCE) / WHEEL_RADIUS
     rate_left = (velocity - 0.5 * steering * WHEEL_DISTANCE) / WHEEL_RADIUS
-    duty_left = rate_left * (GAIN - TRIM) / MOTOR_CONSTANT
-    duty_right = rate_right * (GAIN + TRIM) / MOTOR_CONSTANT
-    return torch.stack([duty_left, duty_right]).clamp(-LIMIT, LIMIT)
+    duty_left = rate_left * (actions.GAIN - actions.TRIM) / actions.MOTOR_CONSTANT
+    duty_right = rate_right * (actions.GAIN + actions.TRIM) / actions.MOTOR_CONSTANT
+    return torch.stack([duty_left, duty_right]).clamp(-actions.LIMIT, actions.LIMIT)

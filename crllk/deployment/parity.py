@@ -1,0 +1,57 @@
+"""How often the pilot on camera frames acts as the policy did in simulation.
+
+The scripted lane follower drives a task; at every step the simulator renders the robot camera
+twice: the policy's own 30×40 observation, and a 640×480 frame as the Duckiebot camera takes
+it, JPEG-encoded as the camera publishes it. The pilot steps on the JPEG; the policy reads the
+observation. Their wheel commands agree when the policy chose the same action.
+"""
+
+from __future__ import annotations
+
+import io
+from dataclasses import dataclass
+
+import numpy as np
+from PIL import Image
+
+from crllk.deployment.pilot import Pilot
+from crllk.tasks.follower import LaneFollower
+from crllk.tasks.lane_keeping import load
+
+CAMERA_FRAME = (480, 640)
+"""Height and width of the Duckiebot camera's frames (pixels)."""
+JPEG_QUALITY = 90
+
+
+@dataclass(frozen=True)
+class Parity:
+    """Frames compared and how many gave the same command."""
+
+    frames: int
+    same: int
+    mean_pixel_difference: float
+    """Mean absolute difference of the two 30×40 images, in 0-255 levels."""
+
+    @property
+    def agreement(self) -> float:
+        return self.same / self.frames
+
+
+def pilot_parity(pilot: Pilot, task: str, frames: int = 900, seed: int = 0,
+                 quality: int = JPEG_QUALITY) -> Parity:
+    """Compares the pilot on JPEG camera frames with the policy on the simulator's images."""
+    env = load(task, observation="pixels", action="duty", seed=seed)
+    follower = LaneFollower(env.task.map, env.task.config.motor)
+    step = env.reset()
+    same, differences = 0, []
+    for _ in range(frames):
+        observation = step.observation["pixels"]
+        buffer = io.BytesIO()
+        Image.fromarray(env.physics.render_camera(*CAMERA_FRAME)).save(
+            buffer, format="JPEG", quality=quality)
+        prepared = pilot.observation_of(buffer.getvalue())
+        same += int(np.array_equal(pilot.duty(prepared), pilot.duty(observation)))
+        differences.append(np.abs(prepared.astype(np.int16) - observation).mean())
+        step = env.reset() if step.last() else env.step(follower.duty(env.physics))
+    env.physics.free_renderers()
+    return Parity(frames, same, float(np.mean(differences)))
