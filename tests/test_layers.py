@@ -17,7 +17,7 @@ LAYERS = (
     ("crllk.maps",),
     ("crllk.sim",),
     ("crllk.tasks",),
-    ("crllk.envs",),
+    ("crllk.envs", "crllk.gym"),
     ("crllk.rl",),
     ("crllk.recording",),
     ("crllk.training",),
