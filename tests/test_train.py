@@ -340,3 +340,19 @@ def test_task_takes_a_name_or_a_path_when_composed(tmp_path):
     assert validate(compose_config(["task=zigzag"])).task_source() == "zigzag"
     with pytest.raises(ConfigError, match=r"task_file: no such file: .*nosuch\.yaml"):
         validate(compose_config([f"task={tmp_path / 'nosuch.yaml'}"]))
+
+
+def test_a_multirun_trains_every_combination_in_parallel(tmp_path):
+    """``-m`` with 2 seeds x 2 thresholds: four runs through the joblib launcher, each in the
+    run directory its swept values name, each with its own settings."""
+    result = subprocess.run(
+        [sys.executable, "-m", "crllk.train", "-m", "seed=0,1",
+         "algo.constraints.lane.threshold=0.5,0.75",
+         f"run_dir={tmp_path}/s${{seed}}-a${{algo.constraints.lane.threshold}}", "obs=state",
+         "num_envs=2", "rollout_steps=4", "total_frames=8", "progress=false", "eval.every=0"],
+        cwd=tmp_path, capture_output=True, text=True, timeout=600)
+    assert result.returncode == 0, result.stderr[-2000:]
+    runs = sorted(p.name for p in tmp_path.iterdir() if (p / "metrics.csv").exists())
+    assert runs == ["s0-a0.5", "s0-a0.75", "s1-a0.5", "s1-a0.75"]
+    saved = OmegaConf.load(tmp_path / "s1-a0.75" / "config.yaml")
+    assert saved.seed == 1 and saved.algo.constraints.lane.threshold == 0.75
