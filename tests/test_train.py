@@ -356,3 +356,17 @@ def test_a_multirun_trains_every_combination_in_parallel(tmp_path):
     assert runs == ["s0-a0.5", "s0-a0.75", "s1-a0.5", "s1-a0.75"]
     saved = OmegaConf.load(tmp_path / "s1-a0.75" / "config.yaml")
     assert saved.seed == 1 and saved.algo.constraints.lane.threshold == 0.75
+
+
+@pytest.mark.slow
+def test_a_multirun_through_submitit_runs_each_job(tmp_path):
+    """The SLURM path tried here: ``hydra/launcher=submitit_local`` (the ``cluster`` extra)
+    runs each job of the sweep as a submitit job into its own run directory."""
+    result = subprocess.run(
+        [sys.executable, "-m", "crllk.train", "-m", "hydra/launcher=submitit_local", "seed=0,1",
+         f"run_dir={tmp_path}/s${{seed}}", "obs=state", "num_envs=2", "rollout_steps=4",
+         "total_frames=8", "progress=false", "eval.every=0"],
+        cwd=tmp_path, capture_output=True, text=True, timeout=900)
+    assert result.returncode == 0, result.stderr[-2000:]
+    assert sorted(p.name for p in tmp_path.iterdir() if (p / "metrics.csv").exists()) == [
+        "s0", "s1"]
