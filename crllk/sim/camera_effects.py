@@ -8,6 +8,7 @@ noise is the same however often, and after however many restores, it is drawn.
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -41,6 +42,7 @@ _DCT = _dct_matrix().astype(np.float32)
 _FROM_YCC = np.linalg.inv(_TO_YCC).astype(np.float32)
 
 
+@functools.lru_cache(maxsize=100)
 def quantisation_steps(quality: int) -> np.ndarray:
     """The (3, 8, 8) quantisation steps of Y, Cb and Cr at ``quality`` (1-100), indexed
     (channel, horizontal frequency, vertical frequency): the standard tables (row: vertical
@@ -61,8 +63,10 @@ def compress(image: np.ndarray, quality: int) -> np.ndarray:
     as encoders do."""
     height, width, _ = image.shape
     pad_h, pad_w = -height % _BLOCK, -width % _BLOCK
-    if pad_h or pad_w:
-        image = np.pad(image, ((0, pad_h), (0, pad_w), (0, 0)), mode="edge")
+    if pad_h:
+        image = np.concatenate([image, np.repeat(image[-1:], pad_h, axis=0)], axis=0)
+    if pad_w:
+        image = np.concatenate([image, np.repeat(image[:, -1:], pad_w, axis=1)], axis=1)
     rows, cols = image.shape[0] // _BLOCK, image.shape[1] // _BLOCK
     pixels = image.astype(np.float32)
     pixels -= 128.0

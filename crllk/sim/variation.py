@@ -10,6 +10,7 @@ visual and actuator fields change: no texture is re-uploaded and the renderers s
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field, fields
 from typing import Any
@@ -134,6 +135,7 @@ def _object_geoms(model: mujoco.MjModel) -> list[np.ndarray]:
     return [np.array(by_index.get(k, []), dtype=int) for k in range(max(by_index, default=-1) + 1)]
 
 
+@functools.lru_cache(maxsize=256)
 def camera_pose(variation: SceneVariation) -> tuple[np.ndarray, np.ndarray]:
     """The robot camera's position and orientation quaternion in the chassis frame (whose
     origin is one wheel radius above the floor). MuJoCo cameras look along their -z axis."""
