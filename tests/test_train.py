@@ -132,15 +132,17 @@ def _comparable(state: dict) -> dict:
     return {**state, "config": config}
 
 
-def test_killed_run_resumes_exactly(tmp_path):
+@pytest.mark.parametrize("randomize", ["none", "default"])
+def test_killed_run_resumes_exactly(tmp_path, randomize):
     """SIGKILL a real ``python -m crllk.train`` after a checkpoint, resume it, and compare its
-    final checkpoint with an uninterrupted run of the same length."""
+    final checkpoint with an uninterrupted run of the same length (also with per-episode
+    domain randomisation)."""
     killed = tmp_path / "killed"
     checkpoint = killed / "checkpoints" / "last.pt"
     # The killed run is started long and resumed short; a falling learning rate follows
     # total_frames, so both runs keep it constant here (the schedule is a function of frames).
-    constant = "ppo.anneal_lr=false"
-    args = [*TINY, constant, f"run_dir={killed}", "total_frames=100000000"]
+    constant = ["ppo.anneal_lr=false", f"task.randomize={randomize}"]
+    args = [*TINY, *constant, f"run_dir={killed}", "total_frames=100000000"]
     process = subprocess.Popen([sys.executable, "-m", "crllk.train", *args], cwd=REPO,
                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     try:
@@ -156,11 +158,11 @@ def test_killed_run_resumes_exactly(tmp_path):
         process.wait()
     iterations = load_checkpoint(checkpoint)["iteration"] + 2
     total = f"total_frames={iterations * FRAMES_PER_ITERATION}"
-    resumed = run_command(*TINY, constant, f"run_dir={killed}", total, "resume=true")
+    resumed = run_command(*TINY, *constant, f"run_dir={killed}", total, "resume=true")
     assert resumed.returncode == 0, resumed.stderr[-2000:]
     assert "resuming" in resumed.stdout
 
-    straight = run_in_process(tmp_path / "straight", iterations, [constant])
+    straight = run_in_process(tmp_path / "straight", iterations, constant)
     a = load_checkpoint(straight / "checkpoints" / "last.pt")
     b = load_checkpoint(checkpoint)
     assert a["iteration"] == b["iteration"] == iterations

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Sequence
+from typing import Any
 
 import torch
 
@@ -24,11 +25,12 @@ _WARMUP_STEPS = 10
 
 
 def batched_env_rate(task: str, observation: str, num_envs: int, steps: int,
-                     seed: int = 0) -> float:
+                     seed: int = 0, overrides: dict[str, Any] | None = None) -> float:
     """Frames/s (``steps * num_envs`` over the time) of ``make_env(task, num_envs=...)``
-    stepped with uniformly random discrete actions and TorchRL auto-reset."""
+    (task settings ``overrides``) stepped with uniformly random discrete actions and TorchRL
+    auto-reset."""
     env = make_env(task, num_envs=num_envs, observation=observation, action="discrete",
-                   seed=seed)
+                   seed=seed, overrides=overrides)
     generator = torch.Generator().manual_seed(seed)
     actions = torch.randint(0, 3, (steps + _WARMUP_STEPS, num_envs), generator=generator)
     tensordict = env.reset()

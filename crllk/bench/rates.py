@@ -7,6 +7,7 @@ import csv
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import mujoco
 import numpy as np
@@ -59,9 +60,12 @@ def raw_render_rate(task: str, steps: int) -> float:
     return rate
 
 
-def env_rate(task: str, observation: str, steps: int, seed: int = 0) -> float:
-    """Steps/s of ``crllk.load(task)`` under uniformly random discrete actions."""
-    env = crllk.load(task, observation=observation, action="discrete", seed=seed)
+def env_rate(task: str, observation: str, steps: int, seed: int = 0,
+             overrides: dict[str, Any] | None = None) -> float:
+    """Steps/s of ``crllk.load(task)`` (task settings ``overrides``) under uniformly random
+    discrete actions."""
+    env = crllk.load(task, observation=observation, action="discrete", seed=seed,
+                     overrides=overrides)
     rng = np.random.default_rng(seed)
     actions = rng.integers(0, 3, size=steps + 100)
     env.reset()

@@ -57,6 +57,7 @@ from crllk.tasks.lane_keeping import (
     command_history_length,
     state_feature_names,
 )
+from crllk.tasks.randomization import max_delay
 from crllk.tasks.teacher import Teacher
 
 DONE_KEYS = ("done", "terminated", "truncated")
@@ -290,9 +291,9 @@ class BatchedLaneKeepingEnv(EnvBase):
                                  f"{expected!r}: restore into an env built with the same "
                                  "arguments")
         for physics, task, sub in zip(self.physics, self.tasks, state["sub_envs"], strict=True):
+            task.load_episode_state(sub["task"], physics)  # its randomisation first
             physics.set_full_state(sub["physics"])
             physics.instabilities = sub["instabilities"]
-            task.load_episode_state(sub["task"])
         self.seeds = list(state["seeds"])
         self.step_counts[:] = state["step_counts"]
         self._observations[:] = state["observations"].numpy()
@@ -316,7 +317,8 @@ class BatchedLaneKeepingEnv(EnvBase):
 def _build_physics(config: TaskConfig, num_envs: int, *, share_renderers: bool) -> list[Physics]:
     """Compile the scene once; the other physics share its ``MjModel`` (and, for pixels, its
     camera renderers: one GL context renders every sub-environment's data in turn)."""
-    first = Physics.from_map(config.map, config.motor)
+    first = Physics.from_map(config.map, config.motor,
+                             max_delay(config.randomize, config.motor))
     copies = [first.copy(share_model=True) for _ in range(num_envs - 1)]
     if share_renderers:
         for physics in copies:

@@ -31,3 +31,12 @@ FORWARD_SERVO_GAIN = 0.1
 """Velocity servo gain of the forward tendon actuator (N m s / rad)."""
 TURN_SERVO_GAIN = 0.05
 """Velocity servo gain of the turn tendon actuator (N m s / rad)."""
+
+CAMERA_AHEAD = 0.066
+"""Camera position ahead of the wheel axle (m)."""
+CAMERA_HEIGHT = 0.108
+"""Camera height above the floor (m)."""
+CAMERA_PITCH = 0.33423
+"""Camera pitch below the horizontal (rad; 19.15 degrees)."""
+CAMERA_FOVY = 75.0
+"""Camera vertical field of view (degrees)."""

@@ -8,6 +8,7 @@ import logging
 import math
 import weakref
 from collections.abc import Sequence
+from typing import Any
 
 import mujoco
 import numpy as np
@@ -18,6 +19,12 @@ from crllk.maps import DuckietownMap
 from crllk.sim import constants as C
 from crllk.sim.motor import MotorConfig, clip_duty
 from crllk.sim.scene import compile_scene
+from crllk.sim.variation import (
+    SceneVariation,
+    VariationTargets,
+    apply_appearance,
+    apply_dynamics,
+)
 
 _OPEN_RENDERERS: weakref.WeakSet[mujoco.Renderer] = weakref.WeakSet()
 """Renderers not yet closed: closed at exit while EGL is still up (their finalisers would
@@ -99,21 +106,37 @@ class Physics(dm_mujoco.Physics):
     """A Duckietown scene with one Duckiebot. Lengths in m, angles in rad, times in s."""
 
     @classmethod
-    def from_map(cls, dmap: DuckietownMap, motor: MotorConfig | None = None) -> Physics:
-        """Build and compile the scene of ``dmap`` with the Duckiebot."""
-        physics = cls.from_model(MjModel(compile_scene(dmap, motor)))
-        physics.motor = motor or MotorConfig()
+    def from_map(cls, dmap: DuckietownMap, motor: MotorConfig | None = None,
+                 max_delay: float = 0.0) -> Physics:
+        """Build and compile the scene of ``dmap`` with the Duckiebot (command delays up to
+        ``max_delay`` s possible by :meth:`set_variation`)."""
+        physics = cls.from_model(MjModel(compile_scene(dmap, motor, max_delay)))
+        physics.motor = physics.nominal_motor = motor or MotorConfig()
         return physics
 
     def copy(self, share_model: bool = False) -> Physics:
-        """A copy of the physics that keeps the motor settings (dm_control's copy drops them)."""
+        """A copy of the physics that keeps the motor settings and variation (dm_control's
+        copy drops them). Copies that share the model know which variation it holds."""
         new = super().copy(share_model=share_model)
-        new.motor = self.motor
+        new.motor, new.nominal_motor, new.trim = self.motor, self.nominal_motor, self.trim
+        new.variation = self.variation
+        # The model (shared, or copied as it is now) holds what this one's holds.
+        new._model_variation = self._model_variation if share_model else \
+            dict(self._model_variation)
         return new
 
     def _reload_from_data(self, data) -> None:
         super()._reload_from_data(data)
-        self.motor = MotorConfig()
+        self.motor = self.nominal_motor = MotorConfig()
+        self.trim = 0.0
+        """Left/right motor asymmetry of the episode (see :meth:`set_wheel_duty`)."""
+        self.variation: SceneVariation | None = None
+        """The episode's scene variation (None: the compiled scene)."""
+        self._model_variation: dict[str, Any] = {"appearance": None, "dynamics": None,
+                                                 "targets": None}
+        """The variations whose appearance and dynamics the (possibly shared) model holds now,
+        and the fields they change (:class:`VariationTargets`, found while the model still
+        held its compiled values)."""
         self.instabilities = 0
         """Physics steps that diverged since construction."""
         self.diverged = False
@@ -181,8 +204,30 @@ class Physics(dm_mujoco.Physics):
         """Command duty cycles (left, right), clipped to [-1, 1], through the DB18 motor
         model."""
         left, right = clip_duty(*duty)
+        if self.trim:
+            left, right = clip_duty(left * (1.0 - self.trim), right * (1.0 + self.trim))
         self._ctrl[:] = (self.motor.max_speed * 0.5 * (left + right),
                          self.motor.yaw_rate_per_duty * (right - left))
+
+    def set_variation(self, variation: SceneVariation | None) -> None:
+        """Use ``variation`` (its appearance, camera and motor model) from now on; None
+        restores the compiled scene and the nominal motor model."""
+        self.variation = variation
+        self.motor = self.nominal_motor if variation is None else variation.motor
+        self.trim = 0.0 if variation is None else variation.trim
+        self._use_variation("dynamics", apply_dynamics)
+        self._use_variation("appearance", apply_appearance)
+
+    def _use_variation(self, part: str, apply: Any) -> None:
+        """Write ``part`` ("dynamics" or "appearance") of this physics' variation into the
+        model if the model holds another one's (copies sharing the model take turns)."""
+        held = self._model_variation
+        if held[part] is self.variation:
+            return
+        if held["targets"] is None:
+            held["targets"] = VariationTargets(self.model.ptr)
+        apply(self.model.ptr, held["targets"], self.variation)
+        held[part] = self.variation
 
     # ----- snapshots --------------------------------------------------------------------
     def full_state(self) -> list[float]:
@@ -197,6 +242,7 @@ class Physics(dm_mujoco.Physics):
         size = mujoco.mj_stateSize(self.model.ptr, _FULL_STATE)
         if len(state) != size:
             raise ValueError(f"physics state has {len(state)} values, this model needs {size}")
+        self._use_variation("dynamics", apply_dynamics)
         mujoco.mj_setState(self.model.ptr, self.data.ptr, np.asarray(state, np.float64),
                            _FULL_STATE)
         mujoco.mj_step1(self.model.ptr, self.data.ptr)
@@ -208,6 +254,8 @@ class Physics(dm_mujoco.Physics):
         any new MuJoCo warning means the state is invalid: then the state is reset and
         :attr:`diverged` set."""
         self.diverged = False
+        if self._model_variation["dynamics"] is not self.variation:
+            self._use_variation("dynamics", apply_dynamics)
         before = self._warning_counts.tolist()
         self._advance(nstep)
         after = self._warning_counts.tolist()
@@ -241,6 +289,9 @@ class Physics(dm_mujoco.Physics):
                       camera: str = C.CAMERA) -> np.ndarray:
         """RGB uint8 image (height, width, 3) from ``camera``, rendered ``supersample`` times
         larger per axis and box-averaged down. One renderer per size is kept and reused."""
+        if self.variation is not None or self._model_variation["appearance"] is not None:
+            self._use_variation("appearance", apply_appearance)
+            mujoco.mj_camlight(self._mj_model, self._mj_data)  # the variation's camera and sun
         size = (height * supersample, width * supersample)
         renderer = self._renderers.get(size)
         if renderer is None:

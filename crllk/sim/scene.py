@@ -20,6 +20,7 @@ from crllk.paths import DUCKIEBOT_XML
 from crllk.sim import constants as C
 from crllk.sim.motor import MotorConfig
 from crllk.sim.texture import texture_png
+from crllk.sim.variation import FLOOR_MATERIAL, SUN, SURROUNDINGS
 
 _SCENE_MARGIN = 1.0
 """Ground visible beyond the map's edge (m)."""
@@ -29,8 +30,10 @@ _OBSTACLE_CONTYPE, _OBSTACLE_CONAFFINITY = 0, 2
 """Obstacles touch only the chassis footprint (contype 2)."""
 
 
-def build_spec(dmap: DuckietownMap, motor: MotorConfig | None = None) -> mujoco.MjSpec:
-    """The whole scene (map and robot) as an ``MjSpec`` ready to compile."""
+def build_spec(dmap: DuckietownMap, motor: MotorConfig | None = None,
+               max_delay: float = 0.0) -> mujoco.MjSpec:
+    """The whole scene (map and robot) as an ``MjSpec`` ready to compile; the actuators keep
+    enough history for command delays up to ``max_delay`` (s) or the motor's own."""
     spec = mujoco.MjSpec()
     spec.modelname = f"duckietown_{dmap.name}"
     spec.option.timestep = C.PHYSICS_TIMESTEP
@@ -44,14 +47,15 @@ def build_spec(dmap: DuckietownMap, motor: MotorConfig | None = None) -> mujoco.
     for index, obj in enumerate(dmap.objects):
         _add_obstacle(spec, obj, index)
     robot = mujoco.MjSpec.from_file(str(DUCKIEBOT_XML))
-    _configure_motors(robot, motor or MotorConfig())
+    _configure_motors(robot, motor or MotorConfig(), max_delay)
     spec.attach(robot, prefix=C.ROBOT_PREFIX, frame=spec.worldbody.add_frame())
     return spec
 
 
-def compile_scene(dmap: DuckietownMap, motor: MotorConfig | None = None) -> mujoco.MjModel:
-    """Compile the scene of ``dmap`` into an ``MjModel``."""
-    return build_spec(dmap, motor).compile()
+def compile_scene(dmap: DuckietownMap, motor: MotorConfig | None = None,
+                  max_delay: float = 0.0) -> mujoco.MjModel:
+    """Compile the scene of ``dmap`` into an ``MjModel`` (see :func:`build_spec`)."""
+    return build_spec(dmap, motor, max_delay).compile()
 
 
 def export_scene(dmap: DuckietownMap, directory: str | Path) -> Path:
@@ -93,7 +97,8 @@ def _add_floor(spec: mujoco.MjSpec, dmap: DuckietownMap) -> None:
                      builtin=mujoco.mjtBuiltin.mjBUILTIN_GRADIENT, rgb1=[0.62, 0.72, 0.82],
                      rgb2=[0.85, 0.85, 0.85], width=64, height=64)
     spec.add_texture(name="map", type=mujoco.mjtTexture.mjTEXTURE_2D, file=texture_file)
-    material = spec.add_material(name="map", rgba=[1, 1, 1, 1], specular=0.0, shininess=0.0)
+    material = spec.add_material(name=FLOOR_MATERIAL, rgba=[1, 1, 1, 1], specular=0.0,
+                                 shininess=0.0)
     material.textures[mujoco.mjtTextureRole.mjTEXROLE_RGB] = "map"
     material.texrepeat = [1, 1]
     material.texuniform = False
@@ -102,7 +107,7 @@ def _add_floor(spec: mujoco.MjSpec, dmap: DuckietownMap) -> None:
         name="map", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[half_w, half_h, 0.1],
         pos=[half_w, half_h, 0.0], material="map", contype=0, conaffinity=0, group=0)
     spec.worldbody.add_geom(
-        name="surroundings", type=mujoco.mjtGeom.mjGEOM_PLANE,
+        name=SURROUNDINGS, type=mujoco.mjtGeom.mjGEOM_PLANE,
         size=[half_w + _SCENE_MARGIN, half_h + _SCENE_MARGIN, 0.1],
         pos=[half_w, half_h, -0.002], rgba=[0.22, 0.22, 0.24, 1], contype=0, conaffinity=0)
     # Physics: one flat invisible ground; road limits are checked geometrically, not by contact.
@@ -113,7 +118,7 @@ def _add_floor(spec: mujoco.MjSpec, dmap: DuckietownMap) -> None:
 
 def _add_lights(spec: mujoco.MjSpec, dmap: DuckietownMap) -> None:
     spec.worldbody.add_light(
-        name="sun", type=mujoco.mjtLightType.mjLIGHT_DIRECTIONAL, castshadow=False,
+        name=SUN, type=mujoco.mjtLightType.mjLIGHT_DIRECTIONAL, castshadow=False,
         pos=[dmap.width / 2, dmap.height / 2, 4.0], dir=[0.3, 0.2, -1.0],
         diffuse=[0.55, 0.55, 0.55], specular=[0.05, 0.05, 0.05])
 
@@ -198,9 +203,10 @@ def _scale_size(geom_type, size: np.ndarray, dims: np.ndarray) -> list[float]:
     return (size * dims).tolist()
 
 
-def _configure_motors(robot: mujoco.MjSpec, motor: MotorConfig) -> None:
-    """Set the actuators' delay, history length and filter time constants from ``motor``."""
-    samples = math.ceil(motor.delay / C.PHYSICS_TIMESTEP) + 2
+def _configure_motors(robot: mujoco.MjSpec, motor: MotorConfig, max_delay: float) -> None:
+    """Set the actuators' delay, history length (for delays up to ``max_delay`` s or the
+    motor's) and filter time constants from ``motor``."""
+    samples = math.ceil(max(motor.delay, max_delay) / C.PHYSICS_TIMESTEP) + 2
     for name, time_constant in (("forward", motor.linear_time_constant),
                                 ("turn", motor.yaw_time_constant)):
         actuator = robot.actuator(name)

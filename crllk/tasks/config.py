@@ -22,6 +22,7 @@ from crllk.paths import task_file, task_names
 from crllk.sim.constants import PHYSICS_TIMESTEP
 from crllk.sim.motor import MotorConfig
 from crllk.tasks.constraints import AGGREGATES, BUILTIN, DEFAULT, SIGNALS, Constraint
+from crllk.tasks.randomization import RandomizeConfig, parse_randomize
 
 
 @dataclass(frozen=True)
@@ -76,6 +77,8 @@ class TaskConfig:
     camera: CameraConfig = field(default_factory=CameraConfig)
     constraints: tuple[Constraint, ...] = tuple(BUILTIN[name] for name in DEFAULT)
     """What the task constrains (:mod:`crllk.tasks.constraints`); its costs, in this order."""
+    randomize: RandomizeConfig | None = None
+    """Per-episode domain randomisation (:mod:`crllk.tasks.randomization`); None: off."""
 
     @property
     def control_timestep(self) -> float:
@@ -130,11 +133,13 @@ def parse_task(settings: Mapping[str, Any], *, name: str, dmap: DuckietownMap,
             kwargs[key] = _parse_section(_SECTIONS[key], value, source, key)
         elif key == "constraints":
             kwargs[key] = parse_constraints(value, source)
+        elif key == "randomize":
+            kwargs[key] = parse_randomize(value, source)
         elif key in _SCALARS:
             kwargs[key] = _check_value(TaskConfig, key, value, source, key)
         else:
             raise ConfigError(source, key, f"unknown setting (known: map, "
-                              f"{', '.join((*_SCALARS, *_SECTIONS, 'constraints'))})")
+                              f"{', '.join((*_SCALARS, *_SECTIONS, 'constraints', 'randomize'))})")
     config = TaskConfig(name=name, map=dmap, source=str(source), **kwargs)
     if config.horizon <= 0:
         raise ConfigError(source, "horizon", f"must be positive, got {config.horizon}")

@@ -28,10 +28,13 @@ from crllk.maps.lanes import LANE_OFFSET
 from crllk.maps.markings import white_lateral
 from crllk.maps.obstacles import ObstacleIndex, footprint_points
 from crllk.sim import constants as C
+from crllk.sim.camera_effects import add_noise, compress
 from crllk.sim.physics import Physics, check_points
+from crllk.sim.variation import SceneVariation
 from crllk.tasks.actions import ACTIONS, action_duty
 from crllk.tasks.config import TaskConfig, load_task_config
 from crllk.tasks.constraints import Constraint
+from crllk.tasks.randomization import draw_variation, max_delay
 
 OBSERVATIONS = ("pixels", "state")
 
@@ -89,6 +92,10 @@ class EpisodeState:
     start_direction: str | None = None
     """The episode's start lane: ``"intended"`` or ``"reverse"`` loop direction of the map
     (None where the map is not one loop)."""
+    variation: dict[str, Any] | None = None
+    """The episode's domain randomisation draws (:meth:`SceneVariation.as_dict`), or None."""
+    steps: int = 0
+    """Control steps taken in the episode (the frame counter of the sensor noise)."""
     hit_object: int | None = None
     """Index in the map's objects of the obstacle the episode ended on, if any."""
 
@@ -127,6 +134,8 @@ class LaneKeeping(base.Task):
         self.action_type = action
         self.episode = EpisodeState()
         """The running episode's state."""
+        self.variation: SceneVariation | None = None
+        """The running episode's domain randomisation (``episode.variation`` as an object)."""
         self.obstacles = obstacle_index(self.map)
         """The map's obstacles in the lane frame (state features and encounter spawns)."""
         self._colliding = tuple(obj for obj in self.map.objects if obj.collidable)
@@ -159,6 +168,10 @@ class LaneKeeping(base.Task):
     def initialize_episode(self, physics: Physics) -> None:
         encounter = self._draw_encounter()
         x, y, yaw = self._spawn_pose(encounter)
+        if self.config.randomize is not None:
+            self.variation = draw_variation(self.config.randomize, self.config.motor,
+                                            len(self.map.objects), self.random)
+            physics.set_variation(self.variation)
         physics.set_pose(x, y, yaw)
         physics.forward()
         pose = self.map.lane_pose(x, y, yaw)
@@ -167,7 +180,8 @@ class LaneKeeping(base.Task):
         self.episode = EpisodeState(
             history=[(0.0, 0.0)] * command_history_length(self.config),
             previous_pose=(x, y, yaw), outcome=self._outcome(0.0, pose, signals, None),
-            encounter=encounter, start_direction=self.map.direction_of(pose.lane))
+            encounter=encounter, start_direction=self.map.direction_of(pose.lane),
+            variation=None if self.variation is None else self.variation.as_dict())
         super().initialize_episode(physics)
 
     def _draw_encounter(self) -> bool:
@@ -229,6 +243,7 @@ class LaneKeeping(base.Task):
         physics.set_wheel_duty(duty)
 
     def after_step(self, physics: Physics) -> None:
+        self.episode.steps += 1
         x, y, yaw = physics.pose()
         pose = self.map.lane_pose(x, y, yaw)
         px, py, _ = self.episode.previous_pose
@@ -316,8 +331,9 @@ class LaneKeeping(base.Task):
         return {"episode": asdict(self.episode),
                 "random": (name, keys.tolist(), position, has_gauss, cached_gaussian)}
 
-    def load_episode_state(self, state: dict[str, Any]) -> None:
-        """Restore an :meth:`episode_state`."""
+    def load_episode_state(self, state: dict[str, Any], physics: Physics | None = None) -> None:
+        """Restore an :meth:`episode_state`; with ``physics``, also the episode's domain
+        randomisation there (before its MuJoCo state is restored)."""
         episode = dict(state["episode"])
         outcome = episode["outcome"]
         episode["outcome"] = None if outcome is None else StepOutcome(**outcome)
@@ -325,6 +341,10 @@ class LaneKeeping(base.Task):
         if episode["previous_pose"] is not None:
             episode["previous_pose"] = tuple(episode["previous_pose"])
         self.episode = EpisodeState(**episode)
+        variation = episode.get("variation")
+        self.variation = None if variation is None else SceneVariation.from_dict(variation)
+        if physics is not None and (self.variation is not None or physics.variation is not None):
+            physics.set_variation(self.variation)
         name, keys, position, has_gauss, cached_gaussian = state["random"]
         self.random.set_state((name, np.asarray(keys, np.uint32), position, has_gauss,
                                cached_gaussian))
@@ -347,8 +367,19 @@ class LaneKeeping(base.Task):
         """The camera image (uint8 HxWx3) or the state features (a list of floats)."""
         if self.observation_type == "pixels":
             cam = self.config.camera
-            return physics.render_camera(cam.height, cam.width, cam.supersample)
+            image = physics.render_camera(cam.height, cam.width, cam.supersample)
+            return image if self.variation is None else self._camera_effects(image)
         return self.state_feature_list(physics)
+
+    def _camera_effects(self, image: np.ndarray) -> np.ndarray:
+        """The episode's JPEG compression and sensor noise (this step's frame) on ``image``."""
+        variation = self.variation
+        if variation.jpeg_quality:
+            image = compress(image, variation.jpeg_quality)
+        if variation.noise_std > 0:
+            image = add_noise(image, variation.noise_std, variation.noise_seed,
+                              self.episode.steps)
+        return image
 
     def obstacle_features(self, pose: LanePose) -> list[float]:
         """For each of the :data:`OBSTACLES_REPORTED` nearest obstacles on the road ahead
@@ -423,7 +454,8 @@ def load(task: str | Path, *, observation: str = "pixels", action: str = "discre
         overrides: task settings to replace, e.g. ``{"horizon": 64}``.
     """
     config = load_task_config(task, overrides)
-    physics = Physics.from_map(config.map, config.motor)
+    physics = Physics.from_map(config.map, config.motor,
+                               max_delay(config.randomize, config.motor))
     lane_task = LaneKeeping(config, observation=observation, action=action, random=seed)
     steps = config.step_limit()  # a time in seconds for dm-control, a hair under the limit
     return control.Environment(
