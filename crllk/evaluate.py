@@ -35,7 +35,14 @@ from crllk.errors import ConfigError
 from crllk.evaluation.report import aggregate, format_aggregate, format_summary
 from crllk.evaluation.runs import evaluate_follower, evaluate_run, record_run
 from crllk.files import atomic_write_text, write_problem
-from crllk.settings import at_least_one, non_negative, one_of, parse_dotlist, setting
+from crllk.settings import (
+    at_least_one,
+    file_stem,
+    non_negative,
+    one_of,
+    parse_dotlist,
+    setting,
+)
 from crllk.training.config import EVALUATION_SEED, algo_thresholds
 
 SOURCE = "evaluate"
@@ -67,6 +74,11 @@ class EvaluateConfig:
     """Record ``record_episodes`` episodes of each run to ``<run>/recordings/eval.rrd``."""
     record_episodes: int = setting(1, check=at_least_one)
     viewer: str = setting("none", check=one_of("none", "spawn", "serve"))
+    overrides: dict[str, Any] = field(default_factory=dict)
+    """Task settings changed for this evaluation, e.g. ``overrides.randomize=default`` or
+    ``overrides.camera.robot_frames=true``; the result goes to ``<run>/<name>.json``."""
+    name: str = setting("eval", check=file_stem)
+    """The result's file name in each run directory, without ``.json``."""
     thresholds: dict[str, float] = field(default_factory=algo_thresholds)
     """The follower's and teacher's constraint thresholds (``thresholds.lane=0.75``); a run
     is judged by its own ``algo.constraints``."""
@@ -105,7 +117,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         for run_dir in config.run_dirs():
             documents.append(evaluate_run(run_dir, episodes=config.episodes,
                                           deterministic=config.deterministic,
-                                          seed=config.seed, num_envs=config.num_envs))
+                                          seed=config.seed, num_envs=config.num_envs,
+                                          overrides=config.overrides, name=config.name))
             print(format_summary(documents[-1]), flush=True)
             if config.record:
                 record_run(run_dir, episodes=config.record_episodes, seed=config.seed,

@@ -60,6 +60,12 @@ def one_of(*choices: str) -> Check:
     return check
 
 
+def file_stem(value: str) -> str | None:
+    """A plain file name without a folder: letters, digits, ``-``, ``_`` and ``.``."""
+    ok = bool(value) and all(c.isalnum() or c in "-_." for c in value) and value[0] != "."
+    return None if ok else "must be a plain file name (letters, digits, -, _, .)"
+
+
 TCP_PORTS = 65536
 """TCP ports are 1 ... 65535."""
 

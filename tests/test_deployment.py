@@ -16,10 +16,11 @@ from torchrl.envs.utils import ExplorationType, set_exploration_type, step_mdp
 from crllk import deploy, export
 from crllk.cli import exit_status
 from crllk.deployment.export import deployed_policy
-from crllk.deployment.frames import crop_to_aspect, policy_image, read_frames
+from crllk.deployment.frames import read_frames
 from crllk.deployment.pilot import Pilot
 from crllk.sim.physics import box_average
 from crllk.tasks.actions import action_duty
+from crllk.tasks.frames import crop_to_aspect, policy_image
 from crllk.training.build import build_env
 from crllk.training.runs import load_actor, load_run_config
 

@@ -175,3 +175,19 @@ def test_help_prints_the_usage(capsys):
 
     assert evaluate.main(["--help"]) == 0
     assert "python -m crllk.evaluate run=" in capsys.readouterr().out
+
+
+def test_an_evaluation_under_changed_task_settings_goes_to_its_own_file(tmp_path):
+    """``overrides.*`` change the run's task for one evaluation (here the deployment path of
+    the camera and randomisation), written to ``<name>.json`` beside the nominal
+    ``eval.json``, which it leaves alone; the document records the overrides."""
+    run = run_in_process(tmp_path / "pixels", 1, ["obs=pixels", "eval.every=0"])
+    nominal = evaluate_run(run, episodes=2, num_envs=2)
+    changed = evaluate_run(run, episodes=2, num_envs=2, name="eval-robot-randomized",
+                           overrides={"camera": {"robot_frames": True},
+                                      "randomize": "default"})
+    assert json.loads((run / "eval.json").read_text())["summary"] == nominal["summary"]
+    assert json.loads((run / "eval-robot-randomized.json").read_text()) == changed
+    assert changed["evaluation"]["task_overrides"] == {"camera": {"robot_frames": True},
+                                                       "randomize": "default"}
+    assert changed["episodes"] != nominal["episodes"]

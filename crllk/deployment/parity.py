@@ -8,19 +8,14 @@ observation. Their wheel commands agree when the policy chose the same action.
 
 from __future__ import annotations
 
-import io
 from dataclasses import dataclass
 
 import numpy as np
-from PIL import Image
 
 from crllk.deployment.pilot import Pilot
 from crllk.tasks.follower import LaneFollower
+from crllk.tasks.frames import JPEG_QUALITY, robot_camera_image
 from crllk.tasks.lane_keeping import load
-
-CAMERA_FRAME = (480, 640)
-"""Height and width of the Duckiebot camera's frames (pixels)."""
-JPEG_QUALITY = 90
 
 
 @dataclass(frozen=True)
@@ -46,10 +41,8 @@ def pilot_parity(pilot: Pilot, task: str, frames: int = 900, seed: int = 0,
     same, differences = 0, []
     for _ in range(frames):
         observation = step.observation["pixels"]
-        buffer = io.BytesIO()
-        Image.fromarray(env.physics.render_camera(*CAMERA_FRAME)).save(
-            buffer, format="JPEG", quality=quality)
-        prepared = pilot.observation_of(buffer.getvalue())
+        prepared = robot_camera_image(env.physics.render_camera, pilot.observation_shape[:2],
+                                      quality)
         same += int(np.array_equal(pilot.duty(prepared), pilot.duty(observation)))
         differences.append(np.abs(prepared.astype(np.int16) - observation).mean())
         step = env.reset() if step.last() else env.step(follower.duty(env.physics))

@@ -2,7 +2,7 @@
 
 ``Pilot.from_onnx(path).step(frame)`` takes one camera frame, JPEG bytes as the Duckiebot camera
 publishes them or an RGB array of any size, prepares it exactly as in training
-(:func:`crllk.deployment.frames.policy_image`), runs the policy with ONNX Runtime and returns a
+(:func:`crllk.tasks.frames.policy_image`), runs the policy with ONNX Runtime and returns a
 :class:`WheelCommand` whose ``vel_left`` and ``vel_right`` in [-1, 1] are the wheel duty cycles
 the policy chose, the values of the robot's ``WheelsCmdStamped`` message. A state policy's
 pilot takes the state features instead.
@@ -18,8 +18,8 @@ import numpy as np
 import onnxruntime
 
 from crllk.deployment.export import INPUT, METADATA_PREFIX
-from crllk.deployment.frames import policy_image
 from crllk.errors import ConfigError
+from crllk.tasks.frames import policy_image
 
 SOURCE = "pilot"
 

@@ -4,8 +4,11 @@ from __future__ import annotations
 
 import json
 import sys
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
+
+from omegaconf import OmegaConf
 
 from crllk.envs.batched import make_env
 from crllk.evaluation.report import result_document
@@ -18,9 +21,15 @@ from crllk.training.runs import EVAL_FILE, load_actor, load_run_config
 
 
 def evaluate_run(run_dir: str | Path, *, episodes: int, deterministic: bool = False,
-                 seed: int | None = None, num_envs: int = 10) -> dict[str, Any]:
-    """Plays the run's checkpoint and writes ``<run_dir>/eval.json``; returns its content."""
+                 seed: int | None = None, num_envs: int = 10,
+                 overrides: Mapping[str, Any] | None = None,
+                 name: str | None = None) -> dict[str, Any]:
+    """Plays the run's checkpoint and writes ``<run_dir>/eval.json`` (or ``<name>.json``);
+    returns its content. ``overrides`` change the run's task settings for this evaluation
+    (e.g. ``{"randomize": {...}}`` or ``{"camera": {"robot_frames": True}}``)."""
     config = load_run_config(run_dir)
+    if overrides:
+        config.task = OmegaConf.to_container(OmegaConf.merge(config.task, dict(overrides)))
     seed = config.eval.seed if seed is None else seed
     env = build_env(config, num_envs=num_envs, seed=seed)
     try:
@@ -33,13 +42,14 @@ def evaluate_run(run_dir: str | Path, *, episodes: int, deterministic: bool = Fa
               "action": config.action.name, "obs": config.obs.name, "train_seed": config.seed,
               **info}
     settings = {"episodes": episodes, "seed": seed, "num_envs": num_envs,
-                "deterministic": deterministic}
+                "deterministic": deterministic, "task_overrides": dict(overrides or {})}
     thresholds = {c.name: config.algo.constraints[c.name].threshold
                   for c in env.config.constraints}
     document = result_document(result, config.action.name, thresholds=thresholds,
                                settings=settings, source=source,
                                objects=env.config.map.objects)
-    atomic_write_text(Path(run_dir) / EVAL_FILE, json.dumps(document, indent=1) + "\n")
+    out = Path(run_dir) / (EVAL_FILE if name is None else f"{name}.json")
+    atomic_write_text(out, json.dumps(document, indent=1) + "\n")
     return document
 
 

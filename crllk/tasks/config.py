@@ -57,6 +57,10 @@ class CameraConfig:
     width: int = 40
     supersample: int = 2
     """Render this many times larger along each axis and average down (anti-aliasing)."""
+    robot_frames: bool = False
+    """Take each image as the robot does instead: a 640x480 frame, JPEG-encoded, prepared as
+    the pilot prepares camera frames (:func:`crllk.tasks.frames.robot_camera_image`). Slower;
+    for evaluating how a policy takes the deployment path."""
 
 
 @dataclass(frozen=True)
@@ -234,6 +238,10 @@ def _check_value(cls: type, name: str, value: Any, source: str | Path, where: st
         return value
     if hint is float:
         return _number(value, source, where, allow_negative=False)
+    if hint is bool:
+        if not isinstance(value, bool):
+            raise ConfigError(source, where, f"expected true or false, got {value!r}")
+        return value
     if typing.get_origin(hint) is tuple:
         if not isinstance(value, list | tuple) or len(value) != 2:
             raise ConfigError(source, where, f"expected [low, high], got {value!r}")

@@ -34,6 +34,7 @@ from crllk.sim.variation import SceneVariation
 from crllk.tasks.actions import ACTIONS, action_duty
 from crllk.tasks.config import TaskConfig, load_task_config
 from crllk.tasks.constraints import Constraint
+from crllk.tasks.frames import robot_camera_image
 from crllk.tasks.randomization import draw_variation, max_delay
 
 OBSERVATIONS = ("pixels", "state")
@@ -367,7 +368,10 @@ class LaneKeeping(base.Task):
         """The camera image (uint8 HxWx3) or the state features (a list of floats)."""
         if self.observation_type == "pixels":
             cam = self.config.camera
-            image = physics.render_camera(cam.height, cam.width, cam.supersample)
+            if cam.robot_frames:
+                image = robot_camera_image(physics.render_camera, (cam.height, cam.width))
+            else:
+                image = physics.render_camera(cam.height, cam.width, cam.supersample)
             return image if self.variation is None else self._camera_effects(image)
         return self.state_feature_list(physics)
 
