@@ -104,7 +104,7 @@ def test_a_finished_run_without_its_checkpoint_is_reused(tiny_experiments, tmp_p
     of its eval.json and its evaluation as current, so nothing is trained again."""
     import shutil
 
-    from crllk.experiments import Settings, evaluation_is_current, trained_frames
+    from crllk.experiments.runs import Settings, evaluation_is_current, trained_frames
 
     runs, _, _ = tiny_experiments
     kept = tmp_path / "kept"
@@ -113,3 +113,27 @@ def test_a_finished_run_without_its_checkpoint_is_reused(tiny_experiments, tmp_p
     assert trained_frames(kept) == 16
     assert evaluation_is_current(kept, Settings(frames=16, episodes=2))
     assert trained_frames(tmp_path / "nothing") == 0
+
+
+def test_robustness_at_a_tiny_budget(tmp_path):
+    """``experiments robustness``: CRLLK-D trained without and with randomisation, each
+    evaluated under the chosen conditions into ``robust-<condition>.json``; a table, its JSON
+    and a figure; a second call reuses every run and evaluation."""
+    runs, results = tmp_path / "runs", tmp_path / "results"
+    argv = [sys.executable, "-m", "crllk.experiments", "robustness", *TINY_EXPERIMENT,
+            "--robust-tasks", "small_loop", "--conditions", "nominal", "trim", "deployment",
+            "--runs-root", str(runs), "--results", str(results)]
+    done = subprocess.run(argv, cwd=REPO, capture_output=True, text=True, timeout=900)
+    assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
+    run = runs / "pixels" / "small_loop" / "CRLLK-D-rand-a0.5-seed0"
+    assert "randomize: default" in (run / "config.yaml").read_text()
+    for condition in ("nominal", "trim", "deployment"):
+        document = json.loads((run / f"robust-{condition}.json").read_text())
+        assert document["evaluation"]["episodes"] == 2
+    assert json.loads((run / "robust-deployment.json").read_text())["evaluation"][
+        "task_overrides"] == {"camera": {"robot_frames": True}}
+    table = (results / "pixels" / "robustness.md").read_text()
+    assert "| trim | randomized |" in table and "| deployment | nominal |" in table
+    assert (results / "pixels" / "robustness.png").stat().st_size > 10_000
+    again = subprocess.run(argv, cwd=REPO, capture_output=True, text=True, timeout=900)
+    assert again.returncode == 0 and "evaluating 0 of 6 run conditions" in again.stdout

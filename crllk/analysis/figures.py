@@ -222,3 +222,31 @@ def draw_sweep(document: Mapping[str, Any]) -> Any:
     axes[0][0].legend(fontsize=7, loc="lower right")
     figure.tight_layout()
     return figure
+
+
+def draw_robustness(document: Mapping[str, Any]) -> Any:
+    """Per map, J_coll and J_clane (mean, with the seeds' spread) under each condition, for
+    the policies trained without and with randomisation; dashed lines are the thresholds."""
+    cells = document["cells"]
+    tasks = list(dict.fromkeys(c["task"] for c in cells))
+    names = list(dict.fromkeys(c["condition"] for c in cells))
+    trainings = list(dict.fromkeys(c["training"] for c in cells))
+    figure, axes = plt.subplots(len(tasks), 2, figsize=(11, 3.2 * len(tasks)), squeeze=False)
+    width = 0.8 / len(trainings)
+    for row, task in enumerate(tasks):
+        for col, (metric, threshold) in enumerate((("J_coll", "collision"), ("J_clane", "lane"))):
+            ax = axes[row][col]
+            for k, training in enumerate(trainings):
+                entries = [next(c for c in cells if c["task"] == task
+                                and c["training"] == training and c["condition"] == name)
+                           for name in names]
+                positions = np.arange(len(names)) + (k - (len(trainings) - 1) / 2) * width
+                ax.bar(positions, [e[metric]["mean"] for e in entries], width,
+                       yerr=[e[metric]["std"] for e in entries], label=training, capsize=2)
+            ax.axhline(document["thresholds"][threshold], linestyle="--", color="grey",
+                       linewidth=1)
+            ax.set_xticks(np.arange(len(names)), names, rotation=30, ha="right", fontsize=8)
+            ax.set_title(f"{task}: {metric}")
+    axes[0][0].legend(fontsize=8)
+    figure.tight_layout()
+    return figure
