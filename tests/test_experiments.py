@@ -8,6 +8,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
 from conftest import TINY_EXPERIMENT
 
 from crllk.experiments import AGENTS, PAPER_TABLE1, sweep_markdown, table_markdown
@@ -115,6 +116,7 @@ def test_a_finished_run_without_its_checkpoint_is_reused(tiny_experiments, tmp_p
     assert trained_frames(tmp_path / "nothing") == 0
 
 
+@pytest.mark.slow
 def test_robustness_at_a_tiny_budget(tmp_path):
     """``experiments robustness``: CRLLK-D trained without and with randomisation, each
     evaluated under the chosen conditions into ``robust-<condition>.json``; a table, its JSON
