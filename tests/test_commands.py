@@ -35,13 +35,15 @@ def test_pictures_command_writes_each_requested_map(tmp_path):
 
 
 def test_bench_prints_each_figure_with_its_bound(capsys):
-    """`python -m crllk.bench` at a tiny budget prints the four figures and two ratios."""
+    """`python -m crllk.bench` at a tiny budget prints the five figures and three ratios
+    (the randomised pixel env against the same env without randomisation among them)."""
     from crllk.bench import cli as bench
 
     bench.main(["--steps", "20"])
     printed = capsys.readouterr().out
     assert "raw MuJoCo physics" in printed and "env, pixel observations" in printed
-    assert printed.count("met") + printed.count("MISSED") == 2
+    assert printed.count("met") + printed.count("MISSED") == 3
+    assert "env, pixels, randomize=default" in printed
 
 
 def test_bench_batched_and_training_figures(capsys, tmp_path):
@@ -59,7 +61,7 @@ def test_bench_batched_and_training_figures(capsys, tmp_path):
     printed = capsys.readouterr().out
     assert "make_env state, num_envs=2" in printed and "make_env pixels, num_envs=2" in printed
     assert "training, state (frames/s)" in printed and "training, pixels (frames/s)" in printed
-    assert printed.count("met") + printed.count("MISSED") == 6
+    assert printed.count("met") + printed.count("MISSED") == 8
     assert f"{run}: 12 s (0.2 min) at 200 frames" in printed
 
 

@@ -42,7 +42,9 @@ def evaluate_run(run_dir: str | Path, *, episodes: int, deterministic: bool = Fa
               "action": config.action.name, "obs": config.obs.name, "train_seed": config.seed,
               **info}
     settings = {"episodes": episodes, "seed": seed, "num_envs": num_envs,
-                "deterministic": deterministic, "task_overrides": dict(overrides or {})}
+                "deterministic": deterministic}
+    if overrides:
+        settings["task_overrides"] = dict(overrides)
     thresholds = {c.name: config.algo.constraints[c.name].threshold
                   for c in env.config.constraints}
     document = result_document(result, config.action.name, thresholds=thresholds,
