@@ -139,3 +139,50 @@ def test_robustness_at_a_tiny_budget(tmp_path):
     assert (results / "pixels" / "robustness.png").stat().st_size > 10_000
     again = subprocess.run(argv, cwd=REPO, capture_output=True, text=True, timeout=900)
     assert again.returncode == 0 and "evaluating 0 of 6 run conditions" in again.stdout
+
+
+def test_runs_become_as_few_trainer_sweeps_as_possible(tmp_path):
+    """Every agent × map × seed of one setting is one multirun; an incomplete product is split
+    by agent, then by map; the run directory interpolates the swept values."""
+    from crllk.experiments import sweep_specs
+    from crllk.experiments.runs import RunSpec, Settings, sweep_commands
+
+    settings = Settings(runs_root=tmp_path, jobs=2)
+    table1 = [RunSpec(a, "small_loop", s) for a in AGENTS for s in (0, 1)]
+    (command,) = sweep_commands(table1, settings)
+    assert command[2:5] == ["crllk.train", "-m", "agent=CRLLK-D,PPO-D,CRLLK-C,PPO-C"]
+    assert {"task=small_loop", "seed=0,1", "hydra.launcher.n_jobs=2"} <= set(command)
+    assert (f"run_dir={tmp_path}/${{task.name}}/${{hydra:runtime.choices.agent}}-a0.5"
+            "-seed${seed}") in command
+    partial = [RunSpec("CRLLK-D", "zigzag", 0), RunSpec("CRLLK-D", "zigzag", 1),
+               RunSpec("CRLLK-D", "obstacle_loop", 1), RunSpec("PPO-D", "zigzag", 1)]
+    swept = [[a for a in c if a.startswith(("agent=", "task=", "seed="))]
+             for c in sweep_commands(partial, settings)]
+    assert swept == [["agent=CRLLK-D", "task=zigzag", "seed=0,1"],
+                     ["agent=CRLLK-D", "task=obstacle_loop", "seed=1"],
+                     ["agent=PPO-D", "task=zigzag", "seed=1"]]
+    grid = sweep_specs(Settings(seeds=(0, 1), lane_weights=(1.0,), collision_weights=(4.0,)))
+    commands = sweep_commands(grid, settings)
+    assert len(commands) == 2 and "task=small_loop,zigzag,obstacle_loop" in commands[1]
+    assert any("-w1-4-a0.5-seed" in a for a in commands[1])
+
+
+def test_a_table_from_a_sweep_run_by_hand(tmp_path):
+    """A multirun started by hand into the experiments' layout is what ``crllk.experiments``
+    reads: it trains nothing and writes the table from those runs."""
+    runs = tmp_path / "runs"
+    tiny = TINY_EXPERIMENT[TINY_EXPERIMENT.index("--set") + 1:]
+    sweep = subprocess.run(
+        [sys.executable, "-m", "crllk.train", "-m", "agent=CRLLK-D,PPO-D", "task=small_loop",
+         "seed=0", "total_frames=16", "progress=false", *tiny,
+         f"run_dir={runs}/pixels/${{task.name}}/${{hydra:runtime.choices.agent}}-a0.5"
+         "-seed${seed}"], cwd=REPO, capture_output=True, text=True, timeout=600)
+    assert sweep.returncode == 0, sweep.stderr[-2000:]
+    table = subprocess.run(
+        [sys.executable, "-m", "crllk.experiments", "table1", *TINY_EXPERIMENT, "--agents",
+         "CRLLK-D", "PPO-D", "--runs-root", str(runs), "--results", str(tmp_path / "results")],
+        cwd=REPO, capture_output=True, text=True, timeout=600)
+    assert table.returncode == 0, table.stdout[-2000:] + table.stderr[-2000:]
+    assert "training 0 of 2 runs" in table.stdout and "evaluating 2 of 2 runs" in table.stdout
+    document = json.loads((tmp_path / "results" / "pixels" / "table1.json").read_text())
+    assert list(document["agents"]) == ["CRLLK-D", "PPO-D"]

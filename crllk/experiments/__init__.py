@@ -7,9 +7,11 @@
     python -m crllk.experiments robustness  # CRLLK-D with and without randomisation, held out
     python -m crllk.experiments all       # table1, maps and figure1
 
-Every run trains in its own ``python -m crllk.train ... resume=true`` process, ``--jobs`` at a
-time (one per core), so an interrupted experiment picks up where its runs stopped and finished
-runs are not trained again. Each run is then evaluated (``python -m crllk.evaluate``; an
+Every experiment trains its runs as trainer multiruns (``python -m crllk.train -m
+task=... seed=... resume=true``, one sweep per agent and setting, Hydra's joblib launcher running
+``--jobs`` at a time, one per core; output in ``<runs-root>/sweeps.log``), so an interrupted
+experiment picks up where its runs stopped and finished runs are not trained again. Each run is
+then evaluated (:func:`crllk.evaluation.runs.evaluate_run`, as ``python -m crllk.evaluate``; an
 ``eval.json`` of the same checkpoint and settings is reused) and the results are written to
 ``results/<obs>/``: a Markdown table with the paper's numbers beside ours and the JSON behind it,
 or the figures. Runs live in ``results/runs/<obs>/<task>/`` and are kept in the repository
@@ -401,7 +403,7 @@ def check_settings(settings: Settings) -> None:
         ConfigError: naming the override or the folder.
     """
     for agent in settings.agents:
-        overrides = [*AGENTS[agent], f"obs={settings.obs}", f"seed={min(settings.seeds)}",
+        overrides = [f"agent={agent}", f"obs={settings.obs}", f"seed={min(settings.seeds)}",
                      f"total_frames={settings.frames}", *settings.train_overrides]
         validate(compose_config(overrides))
     for option, folder in (("--runs-root", settings.runs_root), ("--results", settings.results)):

@@ -12,7 +12,6 @@ deployment camera path and everything together. The table and figure go to
 from __future__ import annotations
 
 import json
-import sys
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -23,8 +22,8 @@ from crllk.experiments.runs import (
     THRESHOLDS,
     RunSpec,
     Settings,
+    evaluate_runs,
     evaluation_is_current,
-    run_parallel,
     train_and_evaluate,
 )
 from crllk.files import atomic_write_text
@@ -43,33 +42,15 @@ def robustness_specs(settings: Settings) -> list[RunSpec]:
             for seed in settings.seeds]
 
 
-def override_arguments(overrides: Mapping[str, Any], prefix: str = "overrides") -> list[str]:
-    """``crllk.evaluate`` arguments of nested task-setting overrides."""
-    arguments = []
-    for key, value in overrides.items():
-        if isinstance(value, Mapping):
-            arguments += override_arguments(value, f"{prefix}.{key}")
-        elif isinstance(value, list | tuple):
-            arguments.append(f"{prefix}.{key}=[{','.join(repr(float(v)) for v in value)}]")
-        else:
-            text = str(value).lower() if isinstance(value, bool) else str(value)
-            arguments.append(f"{prefix}.{key}={text}")
-    return arguments
-
-
 def evaluate_conditions(specs: Sequence[RunSpec], settings: Settings,
                         table: Mapping[str, Mapping[str, Any]]) -> dict[tuple[RunSpec, str], dict]:
     """Evaluates every run under every condition not evaluated yet; returns the documents."""
     root = settings.runs_root
-    commands = [([sys.executable, "-m", "crllk.evaluate", f"run={s.directory(root)}",
-                  f"episodes={settings.episodes}", f"seed={settings.eval_seed}",
-                  f"name={result_name(name)}", *override_arguments(overrides)], s.log(root))
+    requests = [(s.directory(root), {"name": result_name(name), "overrides": dict(overrides)})
                 for s in specs for name, overrides in table.items()
                 if not evaluation_is_current(s.directory(root), settings, result_name(name))]
-    print(f"evaluating {len(commands)} of {len(specs) * len(table)} run conditions", flush=True)
-    failures = run_parallel(commands, settings.jobs)
-    if failures:
-        raise RuntimeError("some evaluations failed:\n" + "\n".join(failures))
+    print(f"evaluating {len(requests)} of {len(specs) * len(table)} run conditions", flush=True)
+    evaluate_runs(requests, settings)
     return {(s, name): json.loads((s.directory(root) / f"{result_name(name)}.json").read_text())
             for s in specs for name in table}
 

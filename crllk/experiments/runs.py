@@ -1,5 +1,5 @@
-"""The runs of an experiment: what each one is, training and evaluating them as processes,
-``--jobs`` at a time, and reusing the finished ones."""
+"""The runs of an experiment: what each one is, training them as trainer multiruns (Hydra's
+joblib launcher, ``--jobs`` at a time), evaluating them, and reusing the finished ones."""
 
 from __future__ import annotations
 
@@ -14,8 +14,10 @@ from pathlib import Path
 from typing import Any
 
 import torch
+from joblib import Parallel, delayed
 
-from crllk.evaluation.report import PAPER_CONSTRAINTS
+from crllk.evaluation.report import PAPER_CONSTRAINTS, format_summary
+from crllk.evaluation.runs import evaluate_run
 from crllk.training.config import EVALUATION_SEED, algo_thresholds
 from crllk.training.runs import CHECKPOINT_FILE, EVAL_FILE, read_eval_json
 
@@ -23,13 +25,9 @@ SOURCE = "experiments"
 """How errors name where a bad option came from."""
 THRESHOLDS = {c["name"]: algo_thresholds()[c["name"]] for c in PAPER_CONSTRAINTS}
 """alpha_1 (dm) and alpha_2 (collisions per episode) of the paper's Table 1: ``algo=crllk``'s."""
-AGENTS = {
-    "CRLLK-D": ("algo=crllk", "action=discrete"),
-    "PPO-D": ("algo=ppo", "action=discrete"),
-    "CRLLK-C": ("algo=crllk", "action=continuous"),
-    "PPO-C": ("algo=ppo", "action=continuous"),
-}
-"""The four agents of Table 1 as trainer overrides."""
+AGENTS = ("CRLLK-D", "PPO-D", "CRLLK-C", "PPO-C")
+"""The four agents of Table 1: choices of the trainer's ``agent`` group (``crllk/conf/agent``),
+each an ``algo`` and an ``action``."""
 PAPER_TABLE1 = {
     "CRLLK-D": {"J_clane": (0.66, 0.02), "J_coll": (0.17, 0.00), "J_R": (69.0, 0.6)},
     "PPO-D": {"J_clane": (0.99, 0.07), "J_coll": (0.38, 0.04), "J_R": (46.6, 3.2)},
@@ -65,18 +63,6 @@ class RunSpec:
     def directory(self, root: Path) -> Path:
         return root / self.task / (f"{self.agent}{self.tag}-a{self.lane_threshold:g}"
                                    f"-seed{self.seed}")
-
-    def log(self, root: Path) -> Path:
-        return self.directory(root).parent / f"{self.directory(root).name}.log"
-
-    def train_command(self, root: Path, settings: Settings) -> list[str]:
-        return [sys.executable, "-m", "crllk.train", f"task={self.task}", *AGENTS[self.agent],
-                f"obs={settings.obs}", f"seed={self.seed}",
-                f"algo.constraints.lane.threshold={self.lane_threshold}",
-                f"algo.constraints.collision.threshold={THRESHOLDS['collision']}",
-                f"total_frames={settings.frames}", f"run_dir={self.directory(root)}",
-                "resume=true", "progress=false", "threads=1", *settings.train_overrides,
-                *self.extra]
 
 
 @dataclass(frozen=True)
@@ -138,51 +124,99 @@ def evaluation_is_current(run_dir: Path, settings: Settings, name: str | None = 
             and evaluation.get("deterministic") is False)
 
 
-def run_parallel(commands: Sequence[tuple[list[str], Path]], jobs: int) -> list[str]:
-    """Runs ``(command, log file)`` pairs, ``jobs`` at a time; returns the failures."""
-    pending, running, failures = list(commands), [], []
-    while pending or running:
-        while pending and len(running) < jobs:
-            command, log = pending.pop(0)
-            log.parent.mkdir(parents=True, exist_ok=True)
-            handle = log.open("a")
-            print(f"  start: {' '.join(command[2:])}  (log: {log})", flush=True)
-            running.append((subprocess.Popen(command, stdout=handle, stderr=subprocess.STDOUT,
-                                             env=_child_env()), handle, command, log))
-        time.sleep(0.5)
-        for entry in list(running):
-            process, handle, command, log = entry
-            if process.poll() is not None:
-                handle.close()
-                running.remove(entry)
-                if process.returncode != 0:
-                    failures.append(f"{' '.join(command[2:])} exited {process.returncode}; "
-                                    f"see {log}")
-    return failures
+def sweep_commands(specs: Sequence[RunSpec], settings: Settings) -> list[list[str]]:
+    """The trainer multiruns (``python -m crllk.train -m``) that train ``specs``: runs that
+    differ only in agent, map and seed are one sweep over ``agent``, ``task`` and ``seed``, its
+    ``run_dir`` interpolating all three. Runs that are not every combination of those are split
+    into sweeps that are: by agent, then by agent and map."""
+    groups: dict[tuple, list[RunSpec]] = {}
+    for spec in specs:
+        groups.setdefault((spec.lane_threshold, spec.extra, spec.tag), []).append(spec)
+    return [_sweep_command(part, settings) for members in groups.values()
+            for part in _products(members)]
+
+
+def _products(specs: Sequence[RunSpec]) -> list[list[RunSpec]]:
+    """``specs`` as few parts as possible, each every agent × map × seed of its own."""
+    def is_product(part: Sequence[RunSpec]) -> bool:
+        axes = [{getattr(s, a) for s in part} for a in ("agent", "task", "seed")]
+        return len(part) == len(axes[0]) * len(axes[1]) * len(axes[2])
+
+    if is_product(specs):
+        return [list(specs)]
+    parts = []
+    for agent in dict.fromkeys(s.agent for s in specs):
+        mine = [s for s in specs if s.agent == agent]
+        parts += [mine] if is_product(mine) else [
+            [s for s in mine if s.task == task] for task in dict.fromkeys(s.task for s in mine)]
+    return parts
+
+
+def _sweep_command(specs: Sequence[RunSpec], settings: Settings) -> list[str]:
+    spec = specs[0]
+    name = spec.directory(settings.runs_root).name.rsplit("-seed", 1)[0].replace(
+        spec.agent, "${hydra:runtime.choices.agent}", 1)
+
+    def values(axis: str) -> str:
+        return ",".join(str(v) for v in dict.fromkeys(getattr(s, axis) for s in specs))
+
+    return [sys.executable, "-m", "crllk.train", "-m", f"agent={values('agent')}",
+            f"task={values('task')}", f"seed={values('seed')}", f"obs={settings.obs}",
+            f"algo.constraints.lane.threshold={spec.lane_threshold}",
+            f"algo.constraints.collision.threshold={THRESHOLDS['collision']}",
+            f"total_frames={settings.frames}",
+            f"run_dir={settings.runs_root}/${{task.name}}/{name}-seed${{seed}}",
+            "resume=true", "progress=false", "threads=1",
+            f"hydra.launcher.n_jobs={settings.jobs}", *settings.train_overrides, *spec.extra]
+
+
+def run_sweeps(commands: Sequence[list[str]], log: Path) -> None:
+    """Runs the trainer multiruns one after another (each runs ``hydra.launcher.n_jobs`` of
+    its jobs at a time), their output appended to ``log``."""
+    log.parent.mkdir(parents=True, exist_ok=True)
+    for command in commands:
+        print(f"  sweep: {' '.join(command[2:])}  (log: {log})", flush=True)
+        with log.open("a") as handle:
+            handle.write(f"$ {' '.join(command[2:])}\n")
+            handle.flush()
+            subprocess.run(command, stdout=handle, stderr=subprocess.STDOUT, env=_child_env(),
+                           check=False)
 
 
 def _child_env() -> dict[str, str]:
-    """Each child uses one core: ``jobs`` children share the machine without oversubscribing."""
+    """Each job uses one core: ``jobs`` of them share the machine without oversubscribing."""
     return {**os.environ, "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
 
 
+def evaluate_runs(requests: Sequence[tuple[Path, dict[str, Any]]], settings: Settings) -> None:
+    """Evaluates ``(run_dir, evaluate_run keyword arguments)`` pairs, ``jobs`` processes at a
+    time (joblib), each on the evaluation seed with ``settings.episodes`` episodes."""
+    Parallel(n_jobs=settings.jobs)(
+        delayed(_evaluate)(run_dir, episodes=settings.episodes, seed=settings.eval_seed,
+                           **kwargs) for run_dir, kwargs in requests)
+
+
+def _evaluate(run_dir: Path, **kwargs: Any) -> None:
+    torch.set_num_threads(1)
+    print(format_summary(evaluate_run(run_dir, **kwargs)), flush=True)
+
+
 def train_and_evaluate(specs: Sequence[RunSpec], settings: Settings) -> Outcome:
-    """Trains the unfinished runs, evaluates the unevaluated ones, returns every evaluation."""
+    """Trains the unfinished runs (trainer multiruns), evaluates the unevaluated ones,
+    returns every evaluation."""
     started = time.perf_counter()
     root = settings.runs_root
     to_train = [s for s in specs if trained_frames(s.directory(root)) < settings.frames]
     print(f"training {len(to_train)} of {len(specs)} runs ({settings.jobs} at a time)",
           flush=True)
-    failures = run_parallel([(s.train_command(root, settings),
-                              s.log(root)) for s in to_train],
-                            settings.jobs)
+    log = root / "sweeps.log"
+    run_sweeps(sweep_commands(to_train, settings), log)
+    unfinished = [s for s in to_train if trained_frames(s.directory(root)) < settings.frames]
+    if unfinished:
+        raise RuntimeError("some runs did not finish (see " + str(log) + "):\n" + "\n".join(
+            str(s.directory(root)) for s in unfinished))
     to_evaluate = [s for s in specs if not evaluation_is_current(s.directory(root), settings)]
     print(f"evaluating {len(to_evaluate)} of {len(specs)} runs", flush=True)
-    failures += run_parallel(
-        [([sys.executable, "-m", "crllk.evaluate", f"run={s.directory(root)}",
-           f"episodes={settings.episodes}", f"seed={settings.eval_seed}"],
-          s.log(root)) for s in to_evaluate], settings.jobs)
-    if failures:
-        raise RuntimeError("some runs failed:\n" + "\n".join(failures))
+    evaluate_runs([(s.directory(root), {}) for s in to_evaluate], settings)
     documents = {s: read_eval_json(s.directory(root)) for s in specs}
     return Outcome(documents, time.perf_counter() - started)

@@ -25,7 +25,7 @@ from crllk.training.config import SOURCE, register_schema
 CONFIG_MODULE = "crllk.conf"
 CONFIG_NAME = "train"
 GROUPS = {"task": "tasks/*.yaml", "algo": "crllk/conf/algo", "action": "crllk/conf/action",
-          "obs": "crllk/conf/obs"}
+          "obs": "crllk/conf/obs", "agent": "crllk/conf/agent"}
 """The trainer's config groups and where their choices live."""
 
 
