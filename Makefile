@@ -6,12 +6,13 @@ PYTHON ?= python3.11
 VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
+CLUSTER_STAMP := $(VENV)/.installed-cluster
 export MUJOCO_GL ?= egl
 export PIP_DISABLE_PIP_VERSION_CHECK := 1
 
 TRAIN_ARGS ?=
 
-.PHONY: install train demo test test-slow lint pictures viewer-pictures clean
+.PHONY: install install-cluster train demo test test-slow lint pictures viewer-pictures clean
 
 install: $(STAMP)
 
@@ -22,6 +23,14 @@ $(STAMP): pyproject.toml scripts/install-egl.sh
 	$(PY) -m pip install -q -e ".[dev]" 2>&1 | grep -v -e "is ignored" -e "Warning" -e "!!" -e "\*\*\*" || true
 	$(PY) -c "import crllk, torch, torchrl, dm_control, rerun" 
 	touch $(STAMP)
+
+# the `cluster` extra (the submitit and Ray launchers, Ray itself: heavy), for the slow tests
+install-cluster: $(CLUSTER_STAMP)
+
+$(CLUSTER_STAMP): $(STAMP)
+	$(PY) -m pip install -q -e ".[dev,cluster]" 2>&1 | grep -v -e "is ignored" -e "Warning" -e "!!" -e "\*\*\*" || true
+	$(PY) -c "import hydra_plugins.hydra_ray_launcher, hydra_plugins.hydra_submitit_launcher, ray"
+	touch $(CLUSTER_STAMP)
 
 train: $(STAMP)
 	$(PY) -m crllk.train resume=true $(TRAIN_ARGS)
@@ -44,7 +53,7 @@ viewer-pictures: $(STAMP)
 test: $(STAMP)
 	$(PY) -m pytest -q
 
-test-slow: $(STAMP)
+test-slow: $(CLUSTER_STAMP)
 	$(PY) -m pytest -q -m slow
 
 lint: $(STAMP)
