@@ -39,6 +39,7 @@ from crllk.experiments.runs import (
     AGENTS,
     FIGURE_THRESHOLDS,
     MAP_TASKS,
+    PAPER_J_R_PER_METRE,
     PAPER_TABLE1,
     PIXEL_FRAMES,
     SOURCE,
@@ -164,7 +165,7 @@ def table_markdown(document: dict[str, Any]) -> str:
             paper_digits = 1 if metric == "J_R" else 2
             paper_cells = [f"{paper[a][metric][0]:.{paper_digits}f} ± "
                            f"{paper[a][metric][1]:.{paper_digits}f}" for a in agents]
-            suffix = " (paper, ≈ 30 per m)" if metric == "J_R" else " (paper)"
+            suffix = f" (paper, ≈ {PAPER_J_R_PER_METRE:g} per m)" if metric == "J_R" else " (paper)"
             rows.append(f"| {metric}{suffix} | " + " | ".join(paper_cells) + " | |")
     minutes = [s / 60 for a in agents for s in results[a]["train_seconds"]]
     obs = settings["obs"]
@@ -188,9 +189,9 @@ def table_markdown(document: dict[str, Any]) -> str:
     ]
     if paper:
         lines += ["The paper's J_R is the sum of its per-step reward (speed × cos(heading) at "
-                  "30 Hz), about 30 per metre; ours is metres along the lane. Its episodes "
-                  "also end on leaving a road tile or hitting an object, after at most 512 "
-                  "steps.", ""]
+                  f"30 Hz), about {PAPER_J_R_PER_METRE:g} per metre; ours is metres along the "
+                  "lane. Its episodes also end on leaving a road tile or hitting an object, "
+                  "after at most 512 steps.", ""]
     constrained = [a for a in agents if a.startswith("CRLLK")]
     lines += ["Constraints (mean over seeds):", "",
               *verdicts(results, constrained, thresholds)]
