@@ -4,6 +4,7 @@
     python -m crllk.evaluate 'runs=[runs/a,runs/b]' episodes=100 out=results/ab.json
     python -m crllk.evaluate follower=true task=small_loop episodes=100
     python -m crllk.evaluate teacher=true task=obstacle_loop episodes=100   # the swerving teacher
+    python -m crllk.evaluate teacher=true task=obstacle_loop action=discrete   # ... in 3 turns
     python -m crllk.evaluate run=... episodes=100 record=true record_episodes=2 [viewer=spawn]
 
 Each run's checkpoint plays ``episodes`` seeded episodes (episode k in sub-environment
@@ -43,6 +44,7 @@ from crllk.settings import (
     parse_dotlist,
     setting,
 )
+from crllk.tasks.actions import ACTIONS
 from crllk.training.config import EVALUATION_SEED, algo_thresholds
 
 SOURCE = "evaluate"
@@ -60,6 +62,10 @@ class EvaluateConfig:
     """Evaluate the privileged teacher (the follower, swerving around obstacles) on ``task``."""
     task: str = "small_loop"
     """The follower's and teacher's task: a name or the path of a task or map file."""
+    action: str = setting("duty", check=one_of(*ACTIONS))
+    """The action type the follower and teacher answer in: their wheel duties, or the nearest
+    action of a policy's type (``discrete``: one of the three turns), as the teacher answers
+    the policy in training."""
     episodes: int = setting(100, check=at_least_one)
     deterministic: bool = False
     """The policy's mode instead of sampled actions."""
@@ -132,7 +138,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                 output[name] = evaluate_follower(
                     config.task, episodes=config.episodes, num_envs=config.num_envs,
                     seed=EVALUATION_SEED if config.seed is None else config.seed,
-                    thresholds=config.thresholds, avoid_obstacles=name == "teacher")
+                    thresholds=config.thresholds, avoid_obstacles=name == "teacher",
+                    action=config.action)
                 print(format_summary(output[name]), flush=True)
         if config.out:
             output["runs"] = documents

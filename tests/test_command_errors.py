@@ -104,6 +104,13 @@ def test_evaluate_names_an_unknown_setting(capsys):
     assert err == "error: evaluate: colour: no such setting"
 
 
+def test_evaluate_names_an_unknown_action_type(capsys):
+    err = _one_line_error(capsys, exit_status(lambda: evaluate.main(["teacher=true",
+                                                                      "action=wheels"])))
+    assert err == ("error: evaluate: action: must be one of discrete, continuous, duckietown, "
+                   "duty, got 'wheels'")
+
+
 # ----- crllk.record and pictures of recordings -----------------------------------------------
 def test_record_checks_where_it_writes_before_driving(capsys, a_file):
     with pytest.raises(SystemExit) as exit_info:

@@ -10,8 +10,8 @@ from torchrl.envs.utils import check_env_specs
 
 import crllk
 from crllk.rl.rollout import run_episodes
-from crllk.tasks.actions import drive_turn_duty, velocity_steering_duty
-from crllk.tasks.teacher import Teacher, duty_to_action
+from crllk.tasks.actions import drive_turn_duty, duty_to_action, velocity_steering_duty
+from crllk.tasks.teacher import Teacher
 
 
 @pytest.mark.parametrize(("duty", "expected"), [
@@ -69,3 +69,16 @@ def test_teacher_action_key_in_the_batched_env():
     frozen = env.rand_step(td)["next", "teacher_action"]
     assert frozen.tolist() == direct
     assert "teacher_action" not in crllk.make_env("small_loop", observation="state").reset()
+
+
+def test_the_teacher_is_evaluated_in_a_policy_action_type():
+    """``crllk.evaluate teacher=true action=discrete``: the teacher answers in the three turns
+    (the imitation target of a discrete policy), through the same metrics."""
+    from crllk.evaluation.runs import evaluate_follower
+
+    document = evaluate_follower("obstacle_loop", episodes=2, num_envs=2, avoid_obstacles=True,
+                                 action="discrete")
+    assert document["source"]["action"] == "discrete"
+    assert set(document["action_histogram"]) == {"left", "right", "straight"}
+    assert sum(document["action_histogram"].values()) == pytest.approx(1.0)  # shares
+    assert all(sum(e["actions"].values()) == e["length"] for e in document["episodes"])

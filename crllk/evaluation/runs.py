@@ -57,10 +57,12 @@ def evaluate_run(run_dir: str | Path, *, episodes: int, deterministic: bool = Fa
 
 def evaluate_follower(task: str | Path, *, episodes: int, seed: int = EVALUATION_SEED,
                       num_envs: int = 10, thresholds: dict[str, float] | None = None,
-                      avoid_obstacles: bool = False) -> dict[str, Any]:
+                      avoid_obstacles: bool = False, action: str = "duty") -> dict[str, Any]:
     """The scripted lane follower through the same episodes and metrics as a run; with
-    ``avoid_obstacles`` the training teacher, which swerves around obstacles."""
-    env = make_env(task, num_envs=num_envs, observation="state", action="duty", seed=seed)
+    ``avoid_obstacles`` the training teacher, which swerves around obstacles. ``action``: the
+    action type it answers in (its wheel duties, or the nearest action of a policy's type, as
+    the teacher answers during training)."""
+    env = make_env(task, num_envs=num_envs, observation="state", action=action, seed=seed)
     try:
         result = run_episodes(env, FollowerPolicy(env, avoid_obstacles=avoid_obstacles),
                               episodes)
@@ -68,11 +70,11 @@ def evaluate_follower(task: str | Path, *, episodes: int, seed: int = EVALUATION
         env.close()
     objects = env.config.map.objects
     return result_document(
-        result, "duty", thresholds=thresholds or algo_thresholds(),
+        result, action, thresholds=thresholds or algo_thresholds(),
         settings={"episodes": episodes, "seed": seed, "num_envs": num_envs,
                   "deterministic": True},
         source={"task": str(task), "algo": "teacher" if avoid_obstacles else "follower",
-                "action": "duty", "obs": "state"},
+                "action": action, "obs": "state"},
         objects=objects)
 
 

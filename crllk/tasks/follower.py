@@ -12,7 +12,7 @@ then turns (v, w) into wheel duty cycles through the DB18 steady-state gains. Th
 is the lane centre, or, given the map's :class:`~crllk.maps.obstacles.ObstacleIndex`, a point
 left of any obstacle that blocks the lane within ``avoid_distance`` ahead; while swerving it
 steers for a heading towards that target and slows down.
-:class:`FollowerPolicy` drives every simulation of a batched env (``action="duty"``) with it.
+:class:`FollowerPolicy` drives every simulation of a batched env with it, in the env's action type.
 """
 
 from __future__ import annotations
@@ -30,6 +30,7 @@ from crllk.maps.obstacles import ObstacleIndex
 from crllk.sim.constants import FOOTPRINT_WIDTH
 from crllk.sim.motor import MotorConfig
 from crllk.sim.physics import Physics
+from crllk.tasks.actions import duty_to_action
 
 
 @dataclass(frozen=True)
@@ -126,15 +127,21 @@ def _predict(x: float, y: float, yaw: float, speed: float, yaw_rate: float,
 
 class FollowerPolicy:
     """The scripted lane follower (:class:`crllk.tasks.follower.LaneFollower`) as a policy for a
-    batched env with ``action="duty"``: writes every sub-environment's wheel duties; with
-    ``avoid_obstacles`` it swerves around obstacles."""
+    batched env: writes every sub-environment's wheel duties, or with another action type the
+    action nearest to them (:func:`crllk.tasks.actions.duty_to_action`, as the teacher answers);
+    with ``avoid_obstacles`` it swerves around obstacles."""
 
     def __init__(self, env: Any, *, avoid_obstacles: bool = False) -> None:
         self.env = env
+        self.action_type = getattr(env, "action_type", "duty")
         obstacles = ObstacleIndex(env.config.map) if avoid_obstacles else None
         self.follower = LaneFollower(env.config.map, env.config.motor, obstacles=obstacles)
 
     def __call__(self, td: TensorDictBase) -> TensorDictBase:
-        duties = np.stack([self.follower.duty(physics) for physics in self.env.physics])
-        td.set("action", torch.as_tensor(duties, dtype=torch.float32))
+        duties = [self.follower.duty(physics) for physics in self.env.physics]
+        if self.action_type == "duty":
+            td.set("action", torch.as_tensor(np.stack(duties), dtype=torch.float32))
+        else:
+            actions = np.stack([duty_to_action(self.action_type, d) for d in duties])
+            td.set("action", torch.as_tensor(actions).to(self.env.action_spec.dtype))
         return td
