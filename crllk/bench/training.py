@@ -24,6 +24,7 @@ from crllk.training.build import build_run
 from crllk.training.compose import compose_config
 from crllk.training.config import TrainConfig, validate
 from crllk.training.loop import learn
+from crllk.training.updates import ppo_update, shape_signals
 
 
 @dataclass(frozen=True)
@@ -82,7 +83,7 @@ class CollectionRates:
     policy_ms: float
     """One stochastic policy forward pass on a batch of ``num_envs`` observations (ms)."""
     update_s: float
-    """An iteration's time beyond its collection: multipliers, GAE and PPO epochs (s)."""
+    """The PPO update of one collected batch: GAE and the epochs (s)."""
 
 
 def collection_rates(config: TrainConfig, iterations: int = 3) -> CollectionRates:
@@ -94,8 +95,12 @@ def collection_rates(config: TrainConfig, iterations: int = 3) -> CollectionRate
         _, carry = collect(env, learner.actor, carry, config.rollout_steps)  # warm-up
         start = time.perf_counter()
         for _ in range(iterations):
-            _, carry = collect(env, learner.actor, carry, config.rollout_steps)
+            batch, carry = collect(env, learner.actor, carry, config.rollout_steps)
         collecting = (time.perf_counter() - start) / iterations
+        shape_signals(batch, config, env.config)
+        start = time.perf_counter()
+        ppo_update(learner, batch, config, generator)
+        update_s = time.perf_counter() - start
 
         episodes = EpisodeAccumulator(config.num_envs, env.constraints)
         start = time.perf_counter()
@@ -116,7 +121,7 @@ def collection_rates(config: TrainConfig, iterations: int = 3) -> CollectionRate
     return CollectionRates(workers=config.workers,
                            collection=config.frames_per_batch / collecting,
                            training=config.frames_per_batch / iterating, policy_ms=policy_ms,
-                           update_s=max(0.0, iterating - collecting))
+                           update_s=update_s)
 
 
 __all__ = ["CollectionRates", "TrainingRates", "bench_config", "collection_rates",
