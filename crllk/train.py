@@ -21,8 +21,8 @@ from crllk.training.compose import compose_config, register, task_paths_as_task_
 from crllk.training.config import TrainConfig, upgrade, validate
 from crllk.training.loop import train
 
-RESUME_KEEPS = ("total_frames", "progress", "threads", "checkpoint_every", "record_every",
-                "viewer", "live", "live_port")
+RESUME_KEEPS = ("total_frames", "progress", "threads", "workers", "checkpoint_every",
+                "record_every", "viewer", "live", "live_port")
 """Settings a resumed run takes from the command line; all others come from its config.yaml."""
 
 

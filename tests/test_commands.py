@@ -65,6 +65,21 @@ def test_bench_batched_and_training_figures(capsys, tmp_path):
     assert f"{run}: 12 s (0.2 min) at 200 frames" in printed
 
 
+def test_bench_worker_figures(capsys):
+    """``--workers 1 2`` at a tiny budget: collection and training frames/s with one and two
+    worker processes, each against the one-process figure, and the main process's shares."""
+    from crllk.bench import cli as bench
+
+    bench.main(["--steps", "8", "--workers", "1", "2", "--obs", "state", "--iterations", "1",
+                "--overrides", "num_envs=2", "rollout_steps=4", "ppo.minibatch_size=4",
+                "ppo.epochs=1"])
+    printed = capsys.readouterr().out
+    for kind in ("collection", "training"):
+        for workers in (1, 2):
+            assert f"{kind}, state, workers={workers} (frames/s)" in printed
+    assert "main process, state: policy forward on 2 observations" in printed
+
+
 def test_rendering_processes_exit_without_egl_noise():
     """Renderers are closed before EGL is terminated: no "Exception ignored" at exit."""
     probe = ("import crllk; env = crllk.load('small_loop', observation='pixels'); "
@@ -97,6 +112,9 @@ def test_record_command_answers_bad_input_with_one_line(argv, problem, capsys, t
     (["--steps", "-1"], "argument --steps: must be at least 1, got -1"),
     (["--num-envs", "0"], "argument --num-envs: must be at least 1, got 0"),
     (["--iterations", "0"], "argument --iterations: must be at least 1, got 0"),
+    (["--workers", "0"], "argument --workers: must be at least 1, got 0"),
+    (["--workers", "3", "--overrides", "num_envs=2"],
+     "override: workers: must divide num_envs (2) into equal shares, got 3"),
     (["--runs", "RUN"], "--runs: no eval.csv"),
 ])
 def test_bench_command_answers_bad_input_with_one_line(argv, problem, capsys, tmp_path):

@@ -2,4 +2,5 @@
 
 from crllk.bench.cli import main
 
-main()
+if __name__ == "__main__":  # worker processes (spawned by --workers) import but never run it
+    main()

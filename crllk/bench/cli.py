@@ -1,19 +1,22 @@
 """Throughput benchmarks, each figure next to the bound it is measured against in the same run.
 
     python -m crllk.bench [--task small_loop] [--steps 3000] [--batched] [--training]
-                          [--runs RUN_DIR ...]
+                          [--workers 1 2 [--obs pixels state]] [--runs RUN_DIR ...]
 
 Bounds: a state-observation environment step should cost at most twice
 the raw MuJoCo physics of one control step (ratio >= 0.5); a pixel environment step at most
 1/0.6 of the raw physics-plus-render of the same scene (ratio >= 0.6) and the pixel environment
 should reach 1,000 steps/s on 2 cores; with ``randomize=default`` pixel steps should keep 90 %
-of their rate without.
+of their rate without. ``--workers 1 2`` times collection (policy in this process, simulations
+in that many worker processes) and whole training iterations for each worker count, each
+against the first count's figure (no target: the ratio is the speed-up).
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from crllk.bench.rates import (
     env_rate,
@@ -25,6 +28,9 @@ from crllk.bench.rates import (
 from crllk.cli import Parser, fail, positive_int, run
 from crllk.errors import ConfigError
 from crllk.tasks.config import load_task_config
+
+if TYPE_CHECKING:
+    from crllk.training.config import TrainConfig
 
 RANDOMIZED = {"randomize": "default"}
 """Task settings of the randomised figures, each measured against the same env without."""
@@ -47,6 +53,11 @@ def main(argv: Sequence[str] | None = None) -> None:
                         help="training iterations per training figure")
     parser.add_argument("--overrides", nargs="*", default=[],
                         help="trainer overrides for the training figures (e.g. num_envs=4)")
+    parser.add_argument("--workers", nargs="+", type=positive_int, default=[],
+                        help="worker-process counts whose collection and training frames/s to "
+                             "compare (the trainer's workers setting), e.g. 1 2")
+    parser.add_argument("--obs", nargs="+", choices=("pixels", "state"),
+                        default=["pixels", "state"], help="observations of the --workers figures")
     parser.add_argument("--runs", nargs="*", type=Path, default=[],
                         help="run directories whose eval.csv gives the time to satisfy both "
                              "constraints")
@@ -56,6 +67,7 @@ def main(argv: Sequence[str] | None = None) -> None:
             fail(f"{run_dir}: --runs: no eval.csv (not a run directory, or no evaluation yet)")
     try:
         load_task_config(args.task)
+        worker_configs = worker_bench_configs(args.task, args.workers, args.obs, args.overrides)
     except ConfigError as err:
         fail(err)
     raw = raw_physics_rate(args.task, args.steps)
@@ -88,11 +100,49 @@ def main(argv: Sequence[str] | None = None) -> None:
             print_row(f"env only, {observation}, num_envs={config.num_envs}", rates.environment)
             print_row(f"training, {observation} (frames/s)", rates.training,
                        rates.environment, 0.5)
+    if worker_configs:
+        print_worker_figures(worker_configs, args.iterations)
     for run_dir in args.runs:
         seconds, frames = time_to_constraints(run_dir)
         verdict = ("never" if seconds is None
                    else f"{seconds:.0f} s ({seconds / 60:.1f} min) at {frames} frames")
         print(f"time to satisfy both constraints, {run_dir}: {verdict}")
+
+
+def worker_bench_configs(task: str, workers: Sequence[int], observations: Sequence[str],
+                         overrides: Sequence[str]) -> dict[str, list[TrainConfig]]:
+    """The trainer configurations of the ``--workers`` figures, by observation (checked before
+    anything is measured).
+
+    Raises:
+        ConfigError: if a worker count does not divide num_envs, or an override is bad.
+    """
+    if not workers:
+        return {}
+    from crllk.bench.training import bench_config
+
+    return {observation: [bench_config([f"task={task}", f"obs={observation}", *overrides,
+                                        f"workers={count}"]) for count in workers]
+            for observation in observations}
+
+
+def print_worker_figures(configs: dict[str, list[TrainConfig]], iterations: int) -> None:
+    """Collection and training frames/s with each number of workers, each against the first
+    number's (bound column: that figure; ratio: the speed-up), then the main process's policy
+    forward pass and update time."""
+    from crllk.bench.training import collection_rates
+
+    for observation, observation_configs in configs.items():
+        measured = [collection_rates(config, iterations=iterations)
+                    for config in observation_configs]
+        base, config = measured[0], observation_configs[0]
+        for kind in ("collection", "training"):
+            for rates in measured:
+                print_row(f"{kind}, {observation}, workers={rates.workers} (frames/s)",
+                          getattr(rates, kind), getattr(base, kind))
+        print(f"main process, {observation}: policy forward on {config.num_envs} observations "
+              f"{base.policy_ms:.1f} ms; update {base.update_s:.2f} s per iteration of "
+              f"{config.frames_per_batch} frames (workers={base.workers})")
 
 
 if __name__ == "__main__":

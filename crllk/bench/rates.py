@@ -95,8 +95,11 @@ def time_to_constraints(run_dir: Path) -> tuple[float | None, int | None]:
 
 def print_row(name: str, rate: float, bound: float | None = None,
                target: float | None = None) -> None:
-    if bound is None or target is None:
+    if bound is None:
         print(f"{name:<48}{rate:>10.0f}")
+        return
+    if target is None:
+        print(f"{name:<48}{rate:>10.0f}{bound:>10.0f}{rate / bound:>8.2f}")
         return
     ratio = rate / bound
     print(f"{name:<48}{rate:>10.0f}{bound:>10.0f}{ratio:>8.2f}{target:>8.2f}"

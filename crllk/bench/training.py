@@ -3,6 +3,9 @@
 Training frames/s counts a whole iteration of :mod:`crllk.train` (collection with the policy,
 GAE for reward and costs, PPO epochs); the bound is the same batched environment stepped with
 random actions and no networks. The target is a ratio of at least 0.5 (state).
+
+:func:`collection_rates` times collection with the policy (and whole iterations) for a number
+of worker processes (the trainer's ``workers``), to compare one process with several.
 """
 
 from __future__ import annotations
@@ -11,12 +14,17 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+import torch
+from torchrl.envs.utils import ExplorationType, set_exploration_type
+
 import crllk  # noqa: F401  (headless GL before torchrl)
 from crllk.envs.episodes import EpisodeAccumulator
+from crllk.rl.rollout import collect
 from crllk.training.build import build_run
 from crllk.training.compose import compose_config
 from crllk.training.config import TrainConfig, validate
 from crllk.training.loop import learn
+from crllk.training.updates import ppo_update, shape_signals
 
 
 @dataclass(frozen=True)
@@ -63,4 +71,58 @@ def training_rates(config: TrainConfig, iterations: int = 5) -> TrainingRates:
     return TrainingRates(training=training, environment=environment)
 
 
-__all__ = ["TrainingRates", "bench_config", "training_rates"]
+@dataclass(frozen=True)
+class CollectionRates:
+    """Frames per second of collection alone (:func:`crllk.rl.rollout.collect`: the policy in
+    this process, the simulations in ``workers`` processes) and of whole training iterations,
+    with the main process's own shares of an iteration."""
+
+    workers: int
+    collection: float
+    training: float
+    policy_ms: float
+    """One stochastic policy forward pass on a batch of ``num_envs`` observations (ms)."""
+    update_s: float
+    """The PPO update of one collected batch: GAE and the epochs (s)."""
+
+
+def collection_rates(config: TrainConfig, iterations: int = 3) -> CollectionRates:
+    """Times ``iterations`` collections and ``iterations`` training iterations (after one
+    warm-up collection), and the policy's forward pass on the collection's batch size."""
+    env, learner, multipliers, generator = build_run(config)
+    try:
+        carry = env.reset()
+        _, carry = collect(env, learner.actor, carry, config.rollout_steps)  # warm-up
+        start = time.perf_counter()
+        for _ in range(iterations):
+            batch, carry = collect(env, learner.actor, carry, config.rollout_steps)
+        collecting = (time.perf_counter() - start) / iterations
+        shape_signals(batch, config, env.config)
+        start = time.perf_counter()
+        ppo_update(learner, batch, config, generator)
+        update_s = time.perf_counter() - start
+
+        episodes = EpisodeAccumulator(config.num_envs, env.constraints)
+        start = time.perf_counter()
+        for _ in range(iterations):
+            carry = learn(config, env, learner, multipliers, generator, episodes, carry, 0)[1]
+        iterating = (time.perf_counter() - start) / iterations
+
+        observations = carry.clone()
+        repeats = 20
+        with torch.no_grad(), set_exploration_type(ExplorationType.RANDOM):
+            learner.actor(observations.clone())
+            start = time.perf_counter()
+            for _ in range(repeats):
+                learner.actor(observations.clone())
+        policy_ms = 1000 * (time.perf_counter() - start) / repeats
+    finally:
+        env.close()
+    return CollectionRates(workers=config.workers,
+                           collection=config.frames_per_batch / collecting,
+                           training=config.frames_per_batch / iterating, policy_ms=policy_ms,
+                           update_s=update_s)
+
+
+__all__ = ["CollectionRates", "TrainingRates", "bench_config", "collection_rates",
+           "training_rates"]

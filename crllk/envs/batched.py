@@ -173,9 +173,22 @@ class BatchedLaneKeepingEnv(EnvBase):
     # ----- seeding ----------------------------------------------------------------------
     def _set_seed(self, seed: int | None) -> None:
         """Reseed every sub-environment's spawn generator; takes effect at the next reset."""
-        self.seeds = sub_env_seeds(seed, self.num_envs)
+        self.set_spawn_seeds(sub_env_seeds(seed, self.num_envs))
+
+    def set_spawn_seeds(self, seeds: Sequence[int]) -> None:
+        """Reseed sub-environment ``i``'s spawn generator with ``seeds[i]`` (takes effect at
+        the next reset): a slice of a larger env's :func:`sub_env_seeds`, so that a worker of
+        :class:`crllk.envs.parallel.ParallelLaneKeepingEnv` plays its share of the
+        simulations exactly as the one-process env would."""
+        if len(seeds) != self.num_envs:
+            raise ValueError(f"{len(seeds)} spawn seeds for {self.num_envs} simulations")
+        self.seeds = [int(s) for s in seeds]
         for task, sub_seed in zip(self.tasks, self.seeds, strict=True):
             task.random.seed(sub_seed)
+
+    def set_teacher_active(self, active: bool) -> None:
+        """Sets :attr:`teacher_active` (a method, so that worker processes can be told)."""
+        self.teacher_active = bool(active)
 
     # ----- reset and step ---------------------------------------------------------------
     def _reset(self, tensordict: TensorDictBase | None = None, **kwargs: Any) -> TensorDictBase:
@@ -314,6 +327,44 @@ class BatchedLaneKeepingEnv(EnvBase):
         super().close(raise_if_closed=raise_if_closed)
 
 
+def merge_sim_states(states: Sequence[dict[str, Any]]) -> dict[str, Any]:
+    """One :meth:`BatchedLaneKeepingEnv.sim_state` from the snapshots of consecutive slices
+    of the simulations (workers in order): the snapshot one env holding them all would take."""
+    first = states[0]
+    merged = {key: first[key] for key in ("task", "observation", "action", "privileged_state",
+                                          "teacher", "commands")}
+    for state in states[1:]:
+        for key, value in merged.items():
+            if state[key] != value:
+                raise ValueError(f"snapshots disagree on {key}: {value!r}, {state[key]!r}")
+    merged["num_envs"] = sum(state["num_envs"] for state in states)
+    for key in ("seeds", "step_counts", "sub_envs"):
+        merged[key] = [item for state in states for item in state[key]]
+    for key in ("observations", "states"):
+        merged[key] = torch.cat([state[key] for state in states])
+    return merged
+
+
+def split_sim_state(state: dict[str, Any], sizes: Sequence[int]) -> list[dict[str, Any]]:
+    """The inverse of :func:`merge_sim_states`: one snapshot per slice of ``sizes``
+    simulations.
+
+    Raises:
+        ValueError: if ``sizes`` do not add up to the snapshot's ``num_envs``.
+    """
+    if sum(sizes) != state.get("num_envs"):
+        raise ValueError(f"snapshot num_envs is {state.get('num_envs')!r}, this env has "
+                         f"{sum(sizes)}: restore into an env built with the same arguments")
+    parts, start = [], 0
+    for size in sizes:
+        part = dict(state, num_envs=size)
+        for key in ("seeds", "step_counts", "sub_envs", "observations", "states"):
+            part[key] = state[key][start:start + size]
+        parts.append(part)
+        start += size
+    return parts
+
+
 def _build_physics(config: TaskConfig, num_envs: int, *, share_renderers: bool) -> list[Physics]:
     """Compile the scene once; the other physics share its ``MjModel`` (and, for pixels, its
     camera renderers: one GL context renders every sub-environment's data in turn)."""
@@ -356,4 +407,5 @@ def make_env(task: str | Path, *, num_envs: int = 1, observation: str = "pixels"
                                  teacher=teacher, commands=commands, device=device)
 
 
-__all__ = ["TERMINATIONS", "BatchedLaneKeepingEnv", "make_env", "sub_env_seeds"]
+__all__ = ["TERMINATIONS", "BatchedLaneKeepingEnv", "make_env", "merge_sim_states",
+           "split_sim_state", "sub_env_seeds"]

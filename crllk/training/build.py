@@ -8,7 +8,8 @@ from dataclasses import dataclass
 import torch
 
 import crllk  # noqa: F401  (chooses the headless GL backend before torchrl imports mujoco)
-from crllk.envs.batched import BatchedLaneKeepingEnv, make_env
+from crllk.envs.batched import BatchedLaneKeepingEnv, make_env, sub_env_seeds
+from crllk.envs.parallel import ParallelLaneKeepingEnv
 from crllk.errors import ConfigError
 from crllk.rl.lagrange import Multiplier, make_multiplier
 from crllk.rl.loss import AdvantageModules, LagrangianPPOLoss, make_advantage_modules
@@ -46,7 +47,31 @@ def build_env(config: TrainConfig, *, num_envs: int, seed: int,
                     commands=config.model.policy_commands)
 
 
-def build_learner(config: TrainConfig, env: BatchedLaneKeepingEnv) -> Learner:
+TrainingEnv = BatchedLaneKeepingEnv | ParallelLaneKeepingEnv
+"""The environment a run collects from: one process (``workers=1``) or several."""
+
+
+def build_training_env(config: TrainConfig) -> TrainingEnv:
+    """The ``num_envs`` training simulations: stepped in this process (``workers=1``), or
+    split among ``workers`` processes through TorchRL's ``ParallelEnv``. Simulation ``i``
+    spawns from the same seed either way."""
+    if config.workers == 1:
+        return build_env(config, num_envs=config.num_envs, seed=config.seed, training=True)
+    share = config.num_envs // config.workers
+    return ParallelLaneKeepingEnv(
+        worker_env, [{"config": config, "first": w * share, "count": share}
+                     for w in range(config.workers)], num_threads=config.threads)
+
+
+def worker_env(config: TrainConfig, first: int, count: int) -> BatchedLaneKeepingEnv:
+    """A worker's share of the training simulations: ``count`` of them from simulation
+    ``first``, each with the spawn seed it has in the one-process env (runs in the worker)."""
+    env = build_env(config, num_envs=count, seed=config.seed, training=True)
+    env.set_spawn_seeds(sub_env_seeds(config.seed, config.num_envs)[first:first + count])
+    return env
+
+
+def build_learner(config: TrainConfig, env: TrainingEnv) -> Learner:
     obs = config.obs.name
     shape = env.observation_spec[obs].shape[1:]
     model = config.model
@@ -102,12 +127,12 @@ def build_multipliers(config: TrainConfig, constraints: Sequence[Constraint]
     return multipliers
 
 
-def build_run(config: TrainConfig) -> tuple[BatchedLaneKeepingEnv, Learner,
-                                            dict[str, Multiplier], torch.Generator]:
+def build_run(config: TrainConfig) -> tuple[TrainingEnv, Learner, dict[str, Multiplier],
+                                            torch.Generator]:
     """Seeds torch and builds the environment, the learner, the multipliers and the generator
     of minibatch orders, in this order (a resumed run rebuilds them the same way)."""
     torch.set_num_threads(config.threads)
     torch.manual_seed(config.seed)
     generator = torch.Generator().manual_seed(config.seed)
-    env = build_env(config, num_envs=config.num_envs, seed=config.seed, training=True)
+    env = build_training_env(config)
     return env, build_learner(config, env), build_multipliers(config, env.constraints), generator

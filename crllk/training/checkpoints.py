@@ -9,12 +9,11 @@ import torch
 from omegaconf import OmegaConf
 from tensordict import TensorDictBase
 
-from crllk.envs.batched import BatchedLaneKeepingEnv
 from crllk.envs.episodes import EpisodeAccumulator
 from crllk.errors import ConfigError
 from crllk.files import atomic_write
 from crllk.rl.lagrange import Multiplier, multiplier_from_state
-from crllk.training.build import Learner
+from crllk.training.build import Learner, TrainingEnv
 from crllk.training.config import TrainConfig
 
 CHECKPOINT_FORMAT = 2
@@ -49,7 +48,7 @@ def load_checkpoint(path: str | Path) -> dict[str, Any]:
 
 
 def checkpoint_state(config: TrainConfig, learner: Learner, multipliers: dict[str, Multiplier],
-                     episodes: EpisodeAccumulator, env: BatchedLaneKeepingEnv,
+                     episodes: EpisodeAccumulator, env: TrainingEnv,
                      generator: torch.Generator, carry: TensorDictBase, *, iteration: int,
                      frames: int, elapsed: float) -> dict[str, Any]:
     return {
@@ -68,7 +67,7 @@ def checkpoint_state(config: TrainConfig, learner: Learner, multipliers: dict[st
 
 
 def restore(state: dict[str, Any], learner: Learner, multipliers: dict[str, Multiplier],
-            episodes: EpisodeAccumulator, env: BatchedLaneKeepingEnv,
+            episodes: EpisodeAccumulator, env: TrainingEnv,
             generator: torch.Generator) -> None:
     learner.actor.load_state_dict(state["actor"])
     for name, critic in learner.critics.items():

@@ -165,7 +165,13 @@ class TrainConfig:
     task_file: str | None = None
     """Path of a task or Duckietown map file; used instead of ``task=`` when set."""
     num_envs: int = setting(16, check=positive)
-    """Simulations stepped together in one process."""
+    """Simulations stepped together (split evenly among ``workers`` processes)."""
+    workers: int = setting(1, check=positive)
+    """Processes that step the simulations; num_envs is split among them (num_envs/workers
+    each, through TorchRL's ParallelEnv; the policy and the PPO update stay in the main
+    process). Simulation i spawns from the same seed whatever the number of workers, so a run
+    with several workers collects exactly what it would with one, and resumes exactly from its
+    checkpoints (with any number of workers)."""
     rollout_steps: int = setting(64, check=positive)
     """Control steps per sub-environment per iteration."""
     reward_scale: float = setting(30.0, check=positive)
@@ -203,6 +209,9 @@ class TrainConfig:
         if self.live != "none" and self.viewer != "none":
             yield "viewer", (f"must be none with live={self.live} (the live view already shows "
                              f"the recordings), got {self.viewer!r}")
+        if self.num_envs % self.workers:
+            yield "workers", (f"must divide num_envs ({self.num_envs}) into equal shares, "
+                              f"got {self.workers}")
         if self.task_file and not Path(self.task_file).exists():
             yield "task_file", f"no such file: {self.task_file}"
 

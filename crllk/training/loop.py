@@ -38,7 +38,7 @@ from crllk.files import atomic_write_text
 from crllk.rl.lagrange import Multiplier
 from crllk.rl.rollout import collect, run_episodes
 from crllk.tasks.constraints import Constraint
-from crllk.training.build import Learner, build_env, build_run
+from crllk.training.build import Learner, TrainingEnv, build_env, build_run
 from crllk.training.checkpoints import checkpoint_state, load_checkpoint, restore, save_checkpoint
 from crllk.training.config import TrainConfig
 from crllk.training.logs import (
@@ -142,7 +142,7 @@ def train(config: TrainConfig) -> Path:
     return run_dir
 
 
-def learn(config: TrainConfig, env: BatchedLaneKeepingEnv, learner: Learner,
+def learn(config: TrainConfig, env: TrainingEnv, learner: Learner,
           multipliers: dict[str, Multiplier], generator: torch.Generator,
           episodes: EpisodeAccumulator, carry: TensorDictBase, frames: int
           ) -> tuple[TensorDictBase, TensorDictBase, list[EpisodeStats], dict[str, float]]:

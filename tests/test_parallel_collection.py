@@ -1,0 +1,68 @@
+"""Collection from several worker processes (``workers``): the same run as with one process,
+exact resume, and a clear refusal when num_envs does not split evenly."""
+
+from __future__ import annotations
+
+import pytest
+from test_train import _assert_same, _comparable, read_rows
+from tiny_runs import run_in_process
+
+from crllk.errors import ConfigError
+from crllk.training.checkpoints import load_checkpoint
+
+NUM_ENVS, ROLLOUT = 2, 4
+SMALL = [f"num_envs={NUM_ENVS}", f"rollout_steps={ROLLOUT}", "obs=state", "eval.every=0",
+         "ppo.anneal_lr=false"]
+"""obs=state, two simulations, four steps per iteration; a constant learning rate, so that runs
+of different lengths share their first iterations."""
+FRAMES = NUM_ENVS * ROLLOUT
+
+
+def _same_runs(a, b, iterations: int) -> None:
+    """Equal final checkpoints (the workers setting aside) and equal metrics rows."""
+    state_a = load_checkpoint(a / "checkpoints" / "last.pt")
+    state_b = load_checkpoint(b / "checkpoints" / "last.pt")
+    assert state_a["iteration"] == state_b["iteration"] == iterations
+    comparable_a, comparable_b = _comparable(state_a), _comparable(state_b)
+    for comparable in (comparable_a, comparable_b):
+        comparable["config"].pop("workers")
+    _assert_same(comparable_a, comparable_b)
+    rows_a, rows_b = read_rows(a / "metrics.csv"), read_rows(b / "metrics.csv")
+    assert [r["iteration"] for r in rows_b] == [str(i) for i in range(1, iterations + 1)]
+    for row_a, row_b in zip(rows_a, rows_b, strict=True):
+        for key in ("time_s", "frames_per_s"):
+            row_a.pop(key), row_b.pop(key)
+        assert row_a == row_b
+
+
+def test_two_workers_train_exactly_as_one_process(tmp_path):
+    """workers=2 trains and writes metrics, and collects exactly what one process would:
+    the metrics and the final checkpoint (networks, multipliers, simulations, episode sums)
+    equal those of workers=1."""
+    two = run_in_process(tmp_path / "two", 3, [*SMALL, "workers=2"], frames_per_iteration=FRAMES)
+    rows = read_rows(two / "metrics.csv")
+    assert [int(r["iteration"]) for r in rows] == [1, 2, 3]
+    assert int(rows[-1]["frames"]) == 3 * FRAMES
+    one = run_in_process(tmp_path / "one", 3, SMALL, frames_per_iteration=FRAMES)
+    _same_runs(one, two, 3)
+
+
+def test_two_workers_stopped_run_resumes_exactly(tmp_path):
+    """A workers=2 run stopped after two iterations (its last checkpoint) and resumed with two
+    workers for two more equals an uninterrupted run (of one process: the test above shows it
+    equal to two workers). The simulations' snapshot goes through the workers both ways."""
+    stopped = run_in_process(tmp_path / "stopped", 2, [*SMALL, "workers=2"],
+                             frames_per_iteration=FRAMES)
+    run_in_process(stopped, 4, [*SMALL, "workers=2", "resume=true"], frames_per_iteration=FRAMES)
+    straight = run_in_process(tmp_path / "straight", 4, SMALL, frames_per_iteration=FRAMES)
+    _same_runs(straight, stopped, 4)
+
+
+def test_workers_that_do_not_divide_num_envs_are_refused(tmp_path):
+    """workers=3 with num_envs=2: one line naming the setting, before any process starts."""
+    with pytest.raises(ConfigError) as error:
+        run_in_process(tmp_path / "run", 1, [*SMALL, "workers=3"], frames_per_iteration=FRAMES)
+    message = str(error.value)
+    assert message == ("override: workers: must divide num_envs (2) into equal shares, "
+                       "got 3"), message
+    assert not (tmp_path / "run").exists()
