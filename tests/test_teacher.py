@@ -82,3 +82,23 @@ def test_the_teacher_is_evaluated_in_a_policy_action_type():
     assert set(document["action_histogram"]) == {"left", "right", "straight"}
     assert sum(document["action_histogram"].values()) == pytest.approx(1.0)  # shares
     assert all(sum(e["actions"].values()) == e["length"] for e in document["episodes"])
+
+
+def test_the_teachers_margin_is_a_training_setting():
+    """``teacher.margin`` sets the gap the teacher keeps beside obstacles; a wider one swerves
+    further left in front of the same obstacle."""
+    from crllk.training.build import build_env
+    from crllk.training.compose import compose_config
+    from crllk.training.config import validate
+
+    config = validate(compose_config(["task=obstacle_loop", "obs=state", "teacher.margin=0.07"]))
+    env = build_env(config, num_envs=1, seed=0, training=True)
+    try:
+        assert env.teachers[0].follower.gains.avoid_margin == 0.07
+        narrow, wide = (Teacher(env.config, env.tasks[0].obstacles, "duty", margin)
+                        for margin in (0.04, 0.07))
+        lane, obstacle = env.tasks[0]._blocking[0]
+        pose = env.config.map.lane_pose(*lane.point_at(obstacle.along_start - 0.3, 0.0))
+        assert wide.follower.swerve_target(pose) < narrow.follower.swerve_target(pose) < 0
+    finally:
+        env.close()

@@ -49,6 +49,7 @@ from torchrl.envs import EnvBase
 
 from crllk.sim.physics import Physics
 from crllk.tasks.config import TaskConfig, load_task_config
+from crllk.tasks.follower import FollowerGains
 from crllk.tasks.lane_keeping import (
     ACTIONS,
     OBSERVATIONS,
@@ -78,6 +79,7 @@ class BatchedLaneKeepingEnv(EnvBase):
     def __init__(self, config: TaskConfig, *, num_envs: int = 1, observation: str = "pixels",
                  action: str = "discrete", seed: int | None = None,
                  privileged_state: bool = False, teacher: bool = False,
+                 teacher_margin: float = FollowerGains.avoid_margin,
                  commands: bool = False, device: torch.device | str = "cpu"):
         if num_envs < 1:
             raise ValueError(f"num_envs must be at least 1, got {num_envs}")
@@ -103,8 +105,8 @@ class BatchedLaneKeepingEnv(EnvBase):
         self.privileged_state = privileged_state and observation == "pixels"
         """Whether pixel observations come with the ``"state"`` features too (for critics)."""
         self._states = np.zeros((num_envs, len(state_feature_names(config))), np.float32)
-        self.teachers = ([Teacher(config, task.obstacles, action) for task in self.tasks]
-                         if teacher else [])
+        self.teachers = ([Teacher(config, task.obstacles, action, teacher_margin)
+                          for task in self.tasks] if teacher else [])
         """With ``teacher``, observations carry ``"teacher_action"``: the privileged teacher's
         action (:mod:`crllk.tasks.teacher`) for the state observed, while :attr:`teacher_active`."""
         self.teacher_active = teacher
@@ -380,8 +382,8 @@ def _build_physics(config: TaskConfig, num_envs: int, *, share_renderers: bool) 
 def make_env(task: str | Path, *, num_envs: int = 1, observation: str = "pixels",
              action: str = "discrete", seed: int | None = None,
              overrides: dict[str, Any] | None = None, privileged_state: bool = False,
-             teacher: bool = False, commands: bool = False,
-             device: torch.device | str = "cpu") -> BatchedLaneKeepingEnv:
+             teacher: bool = False, teacher_margin: float = FollowerGains.avoid_margin,
+             commands: bool = False, device: torch.device | str = "cpu") -> BatchedLaneKeepingEnv:
     """A TorchRL environment with ``num_envs`` lane-keeping simulations in one process.
 
     Args:
@@ -397,6 +399,7 @@ def make_env(task: str | Path, *, num_envs: int = 1, observation: str = "pixels"
             actor-critic); the policy still reads only ``"pixels"``.
         teacher: also return ``"teacher_action"``, the privileged teacher's action for each
             observation (:mod:`crllk.tasks.teacher`), for an imitation loss.
+        teacher_margin: the gap (m) the teacher keeps beside obstacles it passes.
         commands: also return ``"commands"`` (float32 ``[N, 2K]``), the wheel duties of the
             last K steps, newest first (K covers the motor delay).
         device: where the returned tensors live (simulation runs on the CPU).
@@ -404,7 +407,8 @@ def make_env(task: str | Path, *, num_envs: int = 1, observation: str = "pixels"
     config = load_task_config(task, overrides)
     return BatchedLaneKeepingEnv(config, num_envs=num_envs, observation=observation,
                                  action=action, seed=seed, privileged_state=privileged_state,
-                                 teacher=teacher, commands=commands, device=device)
+                                 teacher=teacher, teacher_margin=teacher_margin, commands=commands,
+                                 device=device)
 
 
 __all__ = ["TERMINATIONS", "BatchedLaneKeepingEnv", "make_env", "merge_sim_states",

@@ -15,14 +15,18 @@ from crllk.maps.obstacles import ObstacleIndex
 from crllk.sim.physics import Physics
 from crllk.tasks.actions import duty_to_action
 from crllk.tasks.config import TaskConfig
-from crllk.tasks.follower import LaneFollower
+from crllk.tasks.follower import FollowerGains, LaneFollower
 
 
 class Teacher:
     """The obstacle-avoiding follower of one task, answering in an action type."""
 
-    def __init__(self, config: TaskConfig, obstacles: ObstacleIndex, action_type: str):
-        self.follower = LaneFollower(config.map, config.motor, obstacles=obstacles)
+    def __init__(self, config: TaskConfig, obstacles: ObstacleIndex, action_type: str,
+                 margin: float = FollowerGains.avoid_margin):
+        """``margin``: the gap (m) kept between the robot's side and an obstacle's edge while
+        passing it."""
+        self.follower = LaneFollower(config.map, config.motor, obstacles=obstacles,
+                                     gains=FollowerGains(avoid_margin=margin))
         self.action_type = action_type
 
     def action(self, physics: Physics) -> np.ndarray:

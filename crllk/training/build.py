@@ -44,6 +44,7 @@ def build_env(config: TrainConfig, *, num_envs: int, seed: int,
                     action=config.action.name, seed=seed, overrides=overrides,
                     privileged_state=config.model.critic_input == "state",
                     teacher=training and (config.teacher.coeff > 0 or config.teacher.final > 0),
+                    teacher_margin=config.teacher.margin,
                     commands=config.model.policy_commands)
 
 

@@ -29,6 +29,7 @@ from crllk.settings import (
     tcp_port,
     unit_interval,
 )
+from crllk.tasks.follower import FollowerGains
 
 SOURCE = "override"
 """How errors name where a bad value came from (the command line or the configuration)."""
@@ -130,6 +131,9 @@ class TeacherConfig:
     """The weight moves linearly to ``final`` over these frames ..."""
     final: float = setting(0.3, check=non_negative)
     """... and stays there (0: Lagrangian PPO alone after ``frames``)."""
+    margin: float = setting(FollowerGains.avoid_margin, check=non_negative)
+    """Gap (m) the teacher keeps between the robot's side and an obstacle's edge while passing
+    it (only maps with obstacles in a lane are affected)."""
 
 
 @dataclass
