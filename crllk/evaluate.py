@@ -5,6 +5,7 @@
     python -m crllk.evaluate follower=true task=small_loop episodes=100
     python -m crllk.evaluate teacher=true task=obstacle_loop episodes=100   # the swerving teacher
     python -m crllk.evaluate teacher=true task=obstacle_loop action=discrete   # ... in 3 turns
+    python -m crllk.evaluate teacher=true task=obstacle_loop margin=0.06       # ... 6 cm clear
     python -m crllk.evaluate run=... episodes=100 record=true record_episodes=2 [viewer=spawn]
 
 Each run's checkpoint plays ``episodes`` seeded episodes (episode k in sub-environment
@@ -45,6 +46,7 @@ from crllk.settings import (
     setting,
 )
 from crllk.tasks.actions import ACTIONS
+from crllk.tasks.follower import FollowerGains
 from crllk.training.config import EVALUATION_SEED, algo_thresholds
 
 SOURCE = "evaluate"
@@ -66,6 +68,8 @@ class EvaluateConfig:
     """The action type the follower and teacher answer in: their wheel duties, or the nearest
     action of a policy's type (``discrete``: one of the three turns), as the teacher answers
     the policy in training."""
+    margin: float = setting(FollowerGains.avoid_margin, check=non_negative)
+    """The gap (m) the teacher keeps beside the obstacles it passes (a run's ``teacher.margin``)."""
     episodes: int = setting(100, check=at_least_one)
     deterministic: bool = False
     """The policy's mode instead of sampled actions."""
@@ -139,7 +143,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                     config.task, episodes=config.episodes, num_envs=config.num_envs,
                     seed=EVALUATION_SEED if config.seed is None else config.seed,
                     thresholds=config.thresholds, avoid_obstacles=name == "teacher",
-                    action=config.action)
+                    action=config.action, margin=config.margin)
                 print(format_summary(output[name]), flush=True)
         if config.out:
             output["runs"] = documents

@@ -112,6 +112,12 @@ def test_evaluate_names_an_unknown_action_type(capsys):
 
 
 # ----- crllk.record and pictures of recordings -----------------------------------------------
+def test_evaluate_rejects_a_negative_teacher_margin(capsys):
+    err = _one_line_error(capsys, exit_status(lambda: evaluate.main(["teacher=true",
+                                                                      "margin=-0.01"])))
+    assert err.startswith("error: evaluate: margin: must be >= 0")
+
+
 def test_record_checks_where_it_writes_before_driving(capsys, a_file):
     with pytest.raises(SystemExit) as exit_info:
         record.main(["--task", "small_loop", "--out", str(a_file / "x.rrd")])

@@ -84,6 +84,23 @@ def test_the_teacher_is_evaluated_in_a_policy_action_type():
     assert all(sum(e["actions"].values()) == e["length"] for e in document["episodes"])
 
 
+def test_the_evaluated_teacher_keeps_the_margin_asked_for():
+    """``crllk.evaluate teacher=true margin=0.07``: the teacher evaluated is the one a run with
+    ``teacher.margin=0.07`` imitates, and the document says which."""
+    from crllk.evaluation.runs import evaluate_follower
+    from crllk.tasks.follower import FollowerPolicy
+
+    env = crllk.make_env("obstacle_loop", num_envs=1, observation="state", seed=0)
+    try:
+        policy = FollowerPolicy(env, avoid_obstacles=True, margin=0.07)
+        assert policy.follower.gains.avoid_margin == 0.07
+    finally:
+        env.close()
+    document = evaluate_follower("obstacle_loop", episodes=1, num_envs=1, avoid_obstacles=True,
+                                 margin=0.07)
+    assert document["evaluation"]["margin"] == 0.07
+
+
 def test_the_teachers_margin_is_a_training_setting():
     """``teacher.margin`` sets the gap the teacher keeps beside obstacles; a wider one swerves
     further left in front of the same obstacle."""

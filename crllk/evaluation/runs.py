@@ -14,7 +14,7 @@ from crllk.envs.batched import make_env
 from crllk.evaluation.report import result_document
 from crllk.files import atomic_write_text
 from crllk.rl.rollout import run_episodes
-from crllk.tasks.follower import FollowerPolicy
+from crllk.tasks.follower import FollowerGains, FollowerPolicy
 from crllk.training.build import build_env
 from crllk.training.config import EVALUATION_SEED, algo_thresholds
 from crllk.training.runs import EVAL_FILE, load_actor, load_run_config
@@ -57,22 +57,24 @@ def evaluate_run(run_dir: str | Path, *, episodes: int, deterministic: bool = Fa
 
 def evaluate_follower(task: str | Path, *, episodes: int, seed: int = EVALUATION_SEED,
                       num_envs: int = 10, thresholds: dict[str, float] | None = None,
-                      avoid_obstacles: bool = False, action: str = "duty") -> dict[str, Any]:
+                      avoid_obstacles: bool = False, action: str = "duty",
+                      margin: float = FollowerGains.avoid_margin) -> dict[str, Any]:
     """The scripted lane follower through the same episodes and metrics as a run; with
-    ``avoid_obstacles`` the training teacher, which swerves around obstacles. ``action``: the
+    ``avoid_obstacles`` the training teacher, which swerves around obstacles ``margin`` (m)
+    clear (``teacher.margin`` of a run). ``action``: the
     action type it answers in (its wheel duties, or the nearest action of a policy's type, as
     the teacher answers during training)."""
     env = make_env(task, num_envs=num_envs, observation="state", action=action, seed=seed)
     try:
-        result = run_episodes(env, FollowerPolicy(env, avoid_obstacles=avoid_obstacles),
-                              episodes)
+        policy = FollowerPolicy(env, avoid_obstacles=avoid_obstacles, margin=margin)
+        result = run_episodes(env, policy, episodes)
     finally:
         env.close()
     objects = env.config.map.objects
     return result_document(
         result, action, thresholds=thresholds or algo_thresholds(),
         settings={"episodes": episodes, "seed": seed, "num_envs": num_envs,
-                  "deterministic": True},
+                  "deterministic": True, **({"margin": margin} if avoid_obstacles else {})},
         source={"task": str(task), "algo": "teacher" if avoid_obstacles else "follower",
                 "action": action, "obs": "state"},
         objects=objects)

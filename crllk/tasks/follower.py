@@ -129,13 +129,15 @@ class FollowerPolicy:
     """The scripted lane follower (:class:`crllk.tasks.follower.LaneFollower`) as a policy for a
     batched env: writes every sub-environment's wheel duties, or with another action type the
     action nearest to them (:func:`crllk.tasks.actions.duty_to_action`, as the teacher answers);
-    with ``avoid_obstacles`` it swerves around obstacles."""
+    with ``avoid_obstacles`` it swerves around obstacles, ``margin`` (m) clear of them."""
 
-    def __init__(self, env: Any, *, avoid_obstacles: bool = False) -> None:
+    def __init__(self, env: Any, *, avoid_obstacles: bool = False,
+                 margin: float = FollowerGains.avoid_margin) -> None:
         self.env = env
         self.action_type = getattr(env, "action_type", "duty")
         obstacles = ObstacleIndex(env.config.map) if avoid_obstacles else None
-        self.follower = LaneFollower(env.config.map, env.config.motor, obstacles=obstacles)
+        self.follower = LaneFollower(env.config.map, env.config.motor, obstacles=obstacles,
+                                     gains=FollowerGains(avoid_margin=margin))
 
     def __call__(self, td: TensorDictBase) -> TensorDictBase:
         duties = [self.follower.duty(physics) for physics in self.env.physics]
