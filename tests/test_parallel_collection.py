@@ -4,11 +4,9 @@ exact resume, and a clear refusal when num_envs does not split evenly."""
 from __future__ import annotations
 
 import pytest
-from test_train import _assert_same, _comparable, read_rows
-from tiny_runs import run_in_process
+from tiny_runs import assert_same_runs, read_rows, run_in_process
 
 from crllk.errors import ConfigError
-from crllk.training.checkpoints import load_checkpoint
 
 NUM_ENVS, ROLLOUT = 2, 4
 SMALL = [f"num_envs={NUM_ENVS}", f"rollout_steps={ROLLOUT}", "obs=state", "eval.every=0",
@@ -16,23 +14,6 @@ SMALL = [f"num_envs={NUM_ENVS}", f"rollout_steps={ROLLOUT}", "obs=state", "eval.
 """obs=state, two simulations, four steps per iteration; a constant learning rate, so that runs
 of different lengths share their first iterations."""
 FRAMES = NUM_ENVS * ROLLOUT
-
-
-def _same_runs(a, b, iterations: int) -> None:
-    """Equal final checkpoints (the workers setting aside) and equal metrics rows."""
-    state_a = load_checkpoint(a / "checkpoints" / "last.pt")
-    state_b = load_checkpoint(b / "checkpoints" / "last.pt")
-    assert state_a["iteration"] == state_b["iteration"] == iterations
-    comparable_a, comparable_b = _comparable(state_a), _comparable(state_b)
-    for comparable in (comparable_a, comparable_b):
-        comparable["config"].pop("workers")
-    _assert_same(comparable_a, comparable_b)
-    rows_a, rows_b = read_rows(a / "metrics.csv"), read_rows(b / "metrics.csv")
-    assert [r["iteration"] for r in rows_b] == [str(i) for i in range(1, iterations + 1)]
-    for row_a, row_b in zip(rows_a, rows_b, strict=True):
-        for key in ("time_s", "frames_per_s"):
-            row_a.pop(key), row_b.pop(key)
-        assert row_a == row_b
 
 
 def test_two_workers_train_exactly_as_one_process(tmp_path):
@@ -44,7 +25,7 @@ def test_two_workers_train_exactly_as_one_process(tmp_path):
     assert [int(r["iteration"]) for r in rows] == [1, 2, 3]
     assert int(rows[-1]["frames"]) == 3 * FRAMES
     one = run_in_process(tmp_path / "one", 3, SMALL, frames_per_iteration=FRAMES)
-    _same_runs(one, two, 3)
+    assert_same_runs(one, two, 3, ignore=["workers"])
 
 
 def test_two_workers_stopped_run_resumes_exactly(tmp_path):
@@ -55,7 +36,7 @@ def test_two_workers_stopped_run_resumes_exactly(tmp_path):
                              frames_per_iteration=FRAMES)
     run_in_process(stopped, 4, [*SMALL, "workers=2", "resume=true"], frames_per_iteration=FRAMES)
     straight = run_in_process(tmp_path / "straight", 4, SMALL, frames_per_iteration=FRAMES)
-    _same_runs(straight, stopped, 4)
+    assert_same_runs(straight, stopped, 4, ignore=["workers"])
 
 
 def test_workers_that_do_not_divide_num_envs_are_refused(tmp_path):

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import csv
 import math
 import os
 import secrets
@@ -15,20 +14,22 @@ from pathlib import Path
 
 import psutil
 import pytest
-import torch
 from omegaconf import OmegaConf
-from tiny_runs import FRAMES_PER_ITERATION, NUM_ENVS, TINY, compose_config, run_in_process
+from tiny_runs import (
+    FRAMES_PER_ITERATION,
+    NUM_ENVS,
+    TINY,
+    assert_same_runs,
+    compose_config,
+    read_rows,
+    run_in_process,
+)
 
 from crllk.errors import ConfigError
 from crllk.training.checkpoints import load_checkpoint
 from crllk.training.config import validate
 
 REPO = Path(__file__).resolve().parents[1]
-
-
-def read_rows(path: Path) -> list[dict[str, str]]:
-    with path.open(newline="") as handle:
-        return list(csv.DictReader(handle))
 
 
 def run_command(*args: str, timeout: float = 120) -> subprocess.CompletedProcess:
@@ -108,34 +109,6 @@ def test_a_constraint_without_a_multiplier_fails_clearly(tmp_path):
                                              "task.constraints=[lane,collision,crossing]"])
 
 
-def _assert_same(a, b, path="state"):
-    if isinstance(a, dict):
-        assert set(a) == set(b), path
-        for key in a:
-            _assert_same(a[key], b[key], f"{path}.{key}")
-    elif isinstance(a, (list, tuple)):
-        assert len(a) == len(b), path
-        for i, (x, y) in enumerate(zip(a, b, strict=True)):
-            _assert_same(x, y, f"{path}[{i}]")
-    elif isinstance(a, torch.Tensor):
-        assert torch.equal(a, b), path
-    elif hasattr(a, "shape") and hasattr(a, "dtype"):  # numpy
-        assert (a == b).all(), path
-    elif hasattr(a, "to_dict"):  # TensorDict
-        _assert_same(a.to_dict(), b.to_dict(), path)
-    else:
-        assert a == b or (a != a and b != b), path
-
-
-def _comparable(state: dict) -> dict:
-    state = dict(state)
-    state.pop("elapsed")
-    config = dict(state.pop("config"))
-    config.pop("run_dir")
-    config.pop("resume")
-    return {**state, "config": config}
-
-
 @pytest.mark.parametrize("randomize", ["none", "default"])
 def test_killed_run_resumes_exactly(tmp_path, randomize):
     """SIGKILL a real ``python -m crllk.train`` after a checkpoint, resume it, and compare its
@@ -167,16 +140,7 @@ def test_killed_run_resumes_exactly(tmp_path, randomize):
     assert "resuming" in resumed.stdout
 
     straight = run_in_process(tmp_path / "straight", iterations, constant)
-    a = load_checkpoint(straight / "checkpoints" / "last.pt")
-    b = load_checkpoint(checkpoint)
-    assert a["iteration"] == b["iteration"] == iterations
-    _assert_same(_comparable(a), _comparable(b))
-    rows_a, rows_b = read_rows(straight / "metrics.csv"), read_rows(killed / "metrics.csv")
-    assert [r["iteration"] for r in rows_b] == [str(i) for i in range(1, iterations + 1)]
-    for row_a, row_b in zip(rows_a, rows_b, strict=True):
-        for key in ("time_s", "frames_per_s"):
-            row_a.pop(key), row_b.pop(key)
-        assert row_a == row_b
+    assert_same_runs(straight, killed, iterations)
 
 
 def test_command_line_run_prints_its_directory(tmp_path):

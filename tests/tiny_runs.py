@@ -2,10 +2,15 @@
 
 from __future__ import annotations
 
+import csv
+from collections.abc import Iterable
 from pathlib import Path
+
+import torch
 
 import crllk  # noqa: F401  (headless GL before torchrl)
 from crllk.train import resolve_config
+from crllk.training.checkpoints import load_checkpoint
 from crllk.training.compose import compose_config
 from crllk.training.loop import train
 
@@ -21,3 +26,55 @@ def run_in_process(run_dir: Path, iterations: int, extra: list[str] = (), *,
     cfg = compose_config([*TINY, f"run_dir={run_dir}",
                           f"total_frames={iterations * frames_per_iteration}", *extra])
     return train(resolve_config(cfg))
+
+
+def read_rows(path: Path) -> list[dict[str, str]]:
+    """A CSV log's rows as strings."""
+    with path.open(newline="") as handle:
+        return list(csv.DictReader(handle))
+
+
+def assert_same(a, b, path="state") -> None:
+    """Equal nested checkpoint contents (tensors, arrays, TensorDicts), NaN equal to NaN."""
+    if isinstance(a, dict):
+        assert set(a) == set(b), path
+        for key in a:
+            assert_same(a[key], b[key], f"{path}.{key}")
+    elif isinstance(a, (list, tuple)):
+        assert len(a) == len(b), path
+        for i, (x, y) in enumerate(zip(a, b, strict=True)):
+            assert_same(x, y, f"{path}[{i}]")
+    elif isinstance(a, torch.Tensor):
+        assert torch.equal(a, b), path
+    elif hasattr(a, "shape") and hasattr(a, "dtype"):  # numpy
+        assert (a == b).all(), path
+    elif hasattr(a, "to_dict"):  # TensorDict
+        assert_same(a.to_dict(), b.to_dict(), path)
+    else:
+        assert a == b or (a != a and b != b), path
+
+
+def comparable(state: dict, ignore: Iterable[str] = ()) -> dict:
+    """A checkpoint without what may differ between equal runs: its wall time, and the
+    run directory, ``resume`` and the ``ignore`` settings of its configuration."""
+    state = dict(state)
+    state.pop("elapsed")
+    config = dict(state.pop("config"))
+    for key in ("run_dir", "resume", *ignore):
+        config.pop(key)
+    return {**state, "config": config}
+
+
+def assert_same_runs(a: Path, b: Path, iterations: int, ignore: Iterable[str] = ()) -> None:
+    """Two run directories trained exactly alike for ``iterations``: equal last checkpoints
+    (the ``ignore`` settings aside) and equal ``metrics.csv`` rows but for their timings."""
+    state_a = load_checkpoint(a / "checkpoints" / "last.pt")
+    state_b = load_checkpoint(b / "checkpoints" / "last.pt")
+    assert state_a["iteration"] == state_b["iteration"] == iterations
+    assert_same(comparable(state_a, ignore), comparable(state_b, ignore))
+    rows_a, rows_b = read_rows(a / "metrics.csv"), read_rows(b / "metrics.csv")
+    assert [r["iteration"] for r in rows_b] == [str(i) for i in range(1, iterations + 1)]
+    for row_a, row_b in zip(rows_a, rows_b, strict=True):
+        for key in ("time_s", "frames_per_s"):
+            row_a.pop(key), row_b.pop(key)
+        assert row_a == row_b
