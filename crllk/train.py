@@ -17,7 +17,12 @@ from omegaconf import DictConfig, OmegaConf
 import crllk  # noqa: F401  (chooses the headless GL backend before torchrl imports mujoco)
 from crllk.cli import exit_status
 from crllk.errors import ConfigError
-from crllk.training.compose import compose_config, register, task_paths_as_task_file
+from crllk.training.compose import (
+    compose_config,
+    launcher_problems,
+    register,
+    task_paths_as_task_file,
+)
 from crllk.training.config import TrainConfig, upgrade, validate
 from crllk.training.loop import train
 
@@ -53,11 +58,13 @@ def main(cfg: DictConfig) -> None:
 
 def check_overrides(argv: list[str]) -> None:
     """Composes a plain command line (no ``--`` options) once before Hydra does, so that an
-    unknown setting or choice ends with one line and exit status 2, not Hydra's report."""
-    if any(arg.startswith("-") for arg in argv):
-        return
+    unknown setting or choice ends with one line and exit status 2, not Hydra's report; a
+    launcher whose plugin is not installed is named the same way, also in a multirun."""
     try:
-        compose_config(argv)
+        for problem in launcher_problems(argv):
+            raise problem
+        if not any(arg.startswith("-") for arg in argv):
+            compose_config(argv)
     except ConfigError as err:
         print(f"error: {err}", file=sys.stderr)
         raise SystemExit(2) from None

@@ -133,6 +133,25 @@ def test_a_picture_of_a_missing_recording(tmp_path, capsys):
     assert err == f"error: {tmp_path / 'none.rrd'}: recording: no such file"
 
 
+def test_train_names_a_launcher_whose_plugin_is_missing(capsys, monkeypatch):
+    """``-m hydra/launcher=ray_local`` without the cluster extra: one line naming the launcher
+    and what installs it, before Hydra starts (the plugin is hidden from the import system)."""
+    import importlib.util
+
+    from crllk import train
+
+    real = importlib.util.find_spec
+    monkeypatch.setattr(importlib.util, "find_spec", lambda name, *a: None
+                        if name == "hydra_plugins.hydra_ray_launcher" else real(name, *a))
+    with pytest.raises(SystemExit) as exit_info:
+        train.check_overrides(["-m", "hydra/launcher=ray_local", "seed=0,1"])
+    err = _one_line_error(capsys, exit_info.value.code)
+    assert err == ("error: override: hydra/launcher: 'ray_local' needs "
+                   "hydra_plugins.hydra_ray_launcher, from the cluster extra: "
+                   "pip install -e '.[cluster]'")
+    train.check_overrides(["-m", "hydra/launcher=joblib", "seed=0,1"])  # installed: no error
+
+
 # ----- crllk.experiments ---------------------------------------------------------------------
 @pytest.mark.parametrize(("argv", "words"), [
     (["--set", "foo=1"], "override: foo: no such setting"),

@@ -8,6 +8,7 @@ into one :class:`~crllk.errors.ConfigError` line naming the field and, for a gro
 
 from __future__ import annotations
 
+import importlib.util
 import re
 from collections.abc import Iterable, Sequence
 
@@ -66,6 +67,31 @@ def task_paths_as_task_file(overrides: Iterable[str]) -> list[str]:
     return out
 
 
+_CLUSTER_EXTRA = "the cluster extra: pip install -e '.[cluster]'"
+LAUNCHER_PLUGINS = {
+    "joblib": ("hydra_plugins.hydra_joblib_launcher", "hydra-joblib-launcher (a dependency)"),
+    "submitit": ("hydra_plugins.hydra_submitit_launcher", _CLUSTER_EXTRA),
+    "ray": ("hydra_plugins.hydra_ray_launcher", _CLUSTER_EXTRA),
+}
+"""Hydra launcher families (``hydra/launcher=<family>_<variant>``): the plugin module each
+needs and what installs it."""
+
+
+def launcher_problems(overrides: Iterable[str]) -> list[ConfigError]:
+    """A one-line error for each ``hydra/launcher=NAME`` whose Hydra plugin is not installed
+    (Hydra's own report names a missing config file several lines deep)."""
+    problems = []
+    for override in overrides:
+        key, sep, name = override.partition("=")
+        if not sep or key.removeprefix("override ").strip() != "hydra/launcher":
+            continue
+        plugin = LAUNCHER_PLUGINS.get(name.partition("_")[0])
+        if plugin and importlib.util.find_spec(plugin[0]) is None:
+            problems.append(ConfigError(SOURCE, "hydra/launcher",
+                                        f"{name!r} needs {plugin[0]}, from {plugin[1]}"))
+    return problems
+
+
 def composition_error(err: Exception, overrides: Sequence[str]) -> ConfigError:
     """Hydra's multi-line composition error as one line: ``override: <field>: <problem>``."""
     text = str(err)
@@ -95,4 +121,5 @@ def _first_key(overrides: Sequence[str]) -> str:
     return overrides[0].partition("=")[0] if overrides else "<overrides>"
 
 
-__all__ = ["compose_config", "composition_error", "register", "task_paths_as_task_file"]
+__all__ = ["LAUNCHER_PLUGINS", "compose_config", "composition_error", "launcher_problems",
+           "register", "task_paths_as_task_file"]
