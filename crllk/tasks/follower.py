@@ -49,7 +49,7 @@ class FollowerGains:
     """Look this far beyond the motor delay when predicting the pose (s)."""
     avoid_distance: float = 0.5
     """Swerve around obstacles that block the lane within this distance ahead (m)."""
-    avoid_margin: float = 0.04
+    avoid_margin: float = 0.07
     """Gap kept between the robot's side and an obstacle's edge while passing it (m)."""
     avoid_speed: float = 0.15
     """Forward speed while swerving (m/s)."""
