@@ -74,6 +74,13 @@ def tcp_port(value: int) -> str | None:
     return None if 0 < value < TCP_PORTS else f"must lie in [1, {TCP_PORTS - 1}]"
 
 
+def host_port(value: str) -> str | None:
+    """A network address ``host:port``, e.g. ``127.0.0.1:6379``."""
+    host, _, port = value.rpartition(":")
+    ok = bool(host) and port.isdigit() and tcp_port(int(port)) is None
+    return None if ok else f"must be host:port with a port in [1, {TCP_PORTS - 1}]"
+
+
 def parse(schema: type[Settings], values: Any, source: str) -> Settings:
     """``values`` (a mapping or an OmegaConf config) merged into ``schema`` and checked.
 
@@ -130,5 +137,6 @@ def check(settings: Any, source: str, prefix: str = "") -> None:
         raise ConfigError(source, f"{prefix}{field_name}", problem)
 
 
-__all__ = ["MISSING", "at_least_one", "check", "non_negative", "one_of", "open_unit_interval",
-           "parse", "parse_dotlist", "positive", "setting", "tcp_port", "unit_interval"]
+__all__ = ["MISSING", "at_least_one", "check", "host_port", "non_negative", "one_of",
+           "open_unit_interval", "parse", "parse_dotlist", "positive", "setting", "tcp_port",
+           "unit_interval"]

@@ -26,8 +26,8 @@ from crllk.training.compose import (
 from crllk.training.config import TrainConfig, upgrade, validate
 from crllk.training.loop import train
 
-RESUME_KEEPS = ("total_frames", "progress", "threads", "workers", "checkpoint_every",
-                "record_every", "viewer", "live", "live_port")
+RESUME_KEEPS = ("total_frames", "progress", "threads", "workers", "collector", "ray_address",
+                "checkpoint_every", "record_every", "viewer", "live", "live_port")
 """Settings a resumed run takes from the command line; all others come from its config.yaml."""
 
 

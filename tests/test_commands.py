@@ -116,6 +116,9 @@ def test_record_command_answers_bad_input_with_one_line(argv, problem, capsys, t
     (["--workers", "3", "--overrides", "num_envs=2"],
      "override: workers: must divide num_envs (2) into equal shares, got 3"),
     (["--runs", "RUN"], "--runs: no eval.csv"),
+    (["--training", "--overrides", "collector=ray"],
+     "--overrides: collector: --training times local collection; time collector=ray with "
+     "--workers"),
 ])
 def test_bench_command_answers_bad_input_with_one_line(argv, problem, capsys, tmp_path):
     from crllk.bench import cli as bench

@@ -3,17 +3,14 @@
 from __future__ import annotations
 
 import math
-import os
-import secrets
 import signal
-import socket
 import subprocess
 import sys
 import time
 from pathlib import Path
 
-import psutil
 import pytest
+import ray_cluster
 from omegaconf import OmegaConf
 from tiny_runs import (
     FRAMES_PER_ITERATION,
@@ -342,61 +339,13 @@ def test_a_multirun_through_submitit_runs_each_job(tmp_path):
         "s0", "s1"]
 
 
-LOOPBACK = {"127.0.0.1", "::ffff:127.0.0.1", "::1"}
-RAY_LOCAL_ONLY = {"RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER": "0"}
-"""Without it Ray on Linux turns 127.0.0.1 into the machine's address and listens on all
-interfaces."""
-
-
-def _free_port() -> int:
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        return probe.getsockname()[1]
-
-
-def _listening(roots: list[int]) -> set[tuple[str, int]]:
-    """The TCP addresses the processes ``roots`` and their descendants listen on."""
-    pids = set()
-    for root in roots:
-        try:
-            process = psutil.Process(root)
-            pids |= {root, *(child.pid for child in process.children(recursive=True))}
-        except psutil.NoSuchProcess:
-            continue
-    return {(c.laddr.ip, c.laddr.port) for c in psutil.net_connections(kind="tcp")
-            if c.status == psutil.CONN_LISTEN and c.pid in pids}
-
-
 @pytest.fixture
 def ray_head(tmp_path):
-    """A Ray head bound to 127.0.0.1 on a free port, with its own token (nothing written to
-    ~/.ray); yields its address, the environment that reaches it and its process; stopped by
-    its own pid (``ray start --block`` stops its processes on SIGTERM)."""
+    """A Ray head bound to 127.0.0.1 (:func:`ray_cluster.ray_head`): its address, the
+    environment that reaches it and its process."""
     pytest.importorskip("hydra_plugins.hydra_ray_launcher")  # the cluster extra (make test-slow)
-    port = _free_port()
-    env = {**os.environ, **RAY_LOCAL_ONLY, "RAY_AUTH_MODE": "token",
-           "RAY_AUTH_TOKEN": secrets.token_hex(32), "RAY_USAGE_STATS_ENABLED": "0"}
-    log = tmp_path / "ray_head.log"
-    with log.open("w") as out:
-        head = subprocess.Popen(
-            [str(Path(sys.executable).with_name("ray")), "start", "--head", "--block",
-             "--node-ip-address", "127.0.0.1", "--port", str(port),
-             "--ray-client-server-port", str(_free_port()), "--include-dashboard=false",
-             "--num-cpus", "2", "--disable-usage-stats"],
-            env=env, stdout=out, stderr=subprocess.STDOUT)
-    try:
-        deadline = time.monotonic() + 180
-        while "Ray runtime started" not in log.read_text():
-            assert head.poll() is None and time.monotonic() < deadline, log.read_text()[-3000:]
-            time.sleep(0.5)
-        yield f"127.0.0.1:{port}", env, head
-    finally:
-        head.terminate()
-        try:
-            head.wait(timeout=60)
-        except subprocess.TimeoutExpired:
-            head.kill()
-            head.wait()
+    with ray_cluster.ray_head(tmp_path / "ray_head.log") as head:
+        yield head
 
 
 @pytest.mark.slow
@@ -419,10 +368,10 @@ def test_a_multirun_through_ray_runs_each_job_on_a_head_bound_to_127_0_0_1(tmp_p
         if time.monotonic() > deadline:
             sweep.kill()
             pytest.fail("the sweep did not end: " + log.read_text()[-3000:])
-        listening |= _listening([head.pid, sweep.pid])
+        listening |= ray_cluster.listening([head.pid, sweep.pid])
         time.sleep(0.5)
     assert sweep.returncode == 0, log.read_text()[-3000:]
-    assert listening and {ip for ip, _ in listening} <= LOOPBACK, listening
+    assert listening and {ip for ip, _ in listening} <= ray_cluster.LOOPBACK, listening
     assert sorted(p.name for p in runs.iterdir() if (p / "metrics.csv").exists()) == ["s0", "s1"]
     for seed in (0, 1):
         assert OmegaConf.load(runs / f"s{seed}" / "config.yaml").seed == seed

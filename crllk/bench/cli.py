@@ -9,7 +9,9 @@ the raw MuJoCo physics of one control step (ratio >= 0.5); a pixel environment s
 should reach 1,000 steps/s on 2 cores; with ``randomize=default`` pixel steps should keep 90 %
 of their rate without. ``--workers 1 2`` times collection (policy in this process, simulations
 in that many worker processes) and whole training iterations for each worker count, each
-against the first count's figure (no target: the ratio is the speed-up).
+against the first count's figure (no target: the ratio is the speed-up); with ``--overrides
+collector=ray`` the simulations and the policy run in that many remote collectors of a private
+Ray instance (or of the cluster at ``ray_address=host:port``).
 """
 
 from __future__ import annotations
@@ -68,6 +70,8 @@ def main(argv: Sequence[str] | None = None) -> None:
     try:
         load_task_config(args.task)
         worker_configs = worker_bench_configs(args.task, args.workers, args.obs, args.overrides)
+        training_configs = (training_bench_configs(args.task, args.overrides)
+                            if args.training else [])
     except ConfigError as err:
         fail(err)
     raw = raw_physics_rate(args.task, args.steps)
@@ -91,11 +95,11 @@ def main(argv: Sequence[str] | None = None) -> None:
         rate = batched_env_rate(args.task, "pixels", args.num_envs, steps, overrides=RANDOMIZED)
         print_row(f"make_env pixels, randomize=default, num_envs={args.num_envs}", rate,
                   batched_env_rate(args.task, "pixels", args.num_envs, steps), RANDOMIZED_TARGET)
-    if args.training:
-        from crllk.bench.training import bench_config, training_rates
+    if training_configs:
+        from crllk.bench.training import training_rates
 
-        for observation in ("state", "pixels"):
-            config = bench_config([f"task={args.task}", f"obs={observation}", *args.overrides])
+        for config in training_configs:
+            observation = config.obs.name
             rates = training_rates(config, iterations=args.iterations)
             print_row(f"env only, {observation}, num_envs={config.num_envs}", rates.environment)
             print_row(f"training, {observation} (frames/s)", rates.training,
@@ -107,6 +111,24 @@ def main(argv: Sequence[str] | None = None) -> None:
         verdict = ("never" if seconds is None
                    else f"{seconds:.0f} s ({seconds / 60:.1f} min) at {frames} frames")
         print(f"time to satisfy both constraints, {run_dir}: {verdict}")
+
+
+def training_bench_configs(task: str, overrides: Sequence[str]) -> list[TrainConfig]:
+    """The trainer configurations of the ``--training`` figures, state then pixels (checked
+    before anything is measured).
+
+    Raises:
+        ConfigError: if an override is bad, or asks for remote collectors (these figures step
+            the training env in this process too).
+    """
+    from crllk.bench.training import bench_config
+
+    configs = [bench_config([f"task={task}", f"obs={observation}", *overrides])
+               for observation in ("state", "pixels")]
+    if configs[0].collector != "local":
+        raise ConfigError("--overrides", "collector", "--training times local collection; time "
+                          "collector=ray with --workers")
+    return configs
 
 
 def worker_bench_configs(task: str, workers: Sequence[int], observations: Sequence[str],
@@ -138,7 +160,8 @@ def print_worker_figures(configs: dict[str, list[TrainConfig]], iterations: int)
         base, config = measured[0], observation_configs[0]
         for kind in ("collection", "training"):
             for rates in measured:
-                print_row(f"{kind}, {observation}, workers={rates.workers} (frames/s)",
+                where = "" if rates.collector == "local" else f" collector={rates.collector}"
+                print_row(f"{kind}, {observation},{where} workers={rates.workers} (frames/s)",
                           getattr(rates, kind), getattr(base, kind))
         print(f"main process, {observation}: policy forward on {config.num_envs} observations "
               f"{base.policy_ms:.1f} ms; update {base.update_s:.2f} s per iteration of "

@@ -19,11 +19,10 @@ from torchrl.envs.utils import ExplorationType, set_exploration_type
 
 import crllk  # noqa: F401  (headless GL before torchrl)
 from crllk.envs.episodes import EpisodeAccumulator
-from crllk.rl.rollout import collect
 from crllk.training.build import build_run
 from crllk.training.compose import compose_config
 from crllk.training.config import TrainConfig, validate
-from crllk.training.loop import learn
+from crllk.training.loop import collect_batch, first_carry, learn
 from crllk.training.updates import ppo_update, shape_signals
 
 
@@ -73,15 +72,18 @@ def training_rates(config: TrainConfig, iterations: int = 5) -> TrainingRates:
 
 @dataclass(frozen=True)
 class CollectionRates:
-    """Frames per second of collection alone (:func:`crllk.rl.rollout.collect`: the policy in
-    this process, the simulations in ``workers`` processes) and of whole training iterations,
+    """Frames per second of collection alone (:func:`crllk.training.loop.collect_batch`: the
+    policy in this process and the simulations in ``workers`` processes, or both in
+    ``workers`` remote collectors with ``collector=ray``) and of whole training iterations,
     with the main process's own shares of an iteration."""
 
     workers: int
+    collector: str
     collection: float
     training: float
     policy_ms: float
-    """One stochastic policy forward pass on a batch of ``num_envs`` observations (ms)."""
+    """One stochastic policy forward pass on a batch of ``num_envs`` observations in this
+    process (ms)."""
     update_s: float
     """The PPO update of one collected batch: GAE and the epochs (s)."""
 
@@ -91,11 +93,11 @@ def collection_rates(config: TrainConfig, iterations: int = 3) -> CollectionRate
     warm-up collection), and the policy's forward pass on the collection's batch size."""
     env, learner, multipliers, generator = build_run(config)
     try:
-        carry = env.reset()
-        _, carry = collect(env, learner.actor, carry, config.rollout_steps)  # warm-up
+        carry = first_carry(env)
+        _, carry = collect_batch(env, learner.actor, carry, config.rollout_steps)  # warm-up
         start = time.perf_counter()
         for _ in range(iterations):
-            batch, carry = collect(env, learner.actor, carry, config.rollout_steps)
+            batch, carry = collect_batch(env, learner.actor, carry, config.rollout_steps)
         collecting = (time.perf_counter() - start) / iterations
         shape_signals(batch, config, env.config)
         start = time.perf_counter()
@@ -108,7 +110,7 @@ def collection_rates(config: TrainConfig, iterations: int = 3) -> CollectionRate
             carry = learn(config, env, learner, multipliers, generator, episodes, carry, 0)[1]
         iterating = (time.perf_counter() - start) / iterations
 
-        observations = carry.clone()
+        observations = batch[:, -1].select(*learner.actor.in_keys)
         repeats = 20
         with torch.no_grad(), set_exploration_type(ExplorationType.RANDOM):
             learner.actor(observations.clone())
@@ -118,7 +120,7 @@ def collection_rates(config: TrainConfig, iterations: int = 3) -> CollectionRate
         policy_ms = 1000 * (time.perf_counter() - start) / repeats
     finally:
         env.close()
-    return CollectionRates(workers=config.workers,
+    return CollectionRates(workers=config.workers, collector=config.collector,
                            collection=config.frames_per_batch / collecting,
                            training=config.frames_per_batch / iterating, policy_ms=policy_ms,
                            update_s=update_s)

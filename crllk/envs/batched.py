@@ -329,6 +329,28 @@ class BatchedLaneKeepingEnv(EnvBase):
         super().close(raise_if_closed=raise_if_closed)
 
 
+class MirroredTeacherFlag:
+    """:attr:`teacher_active` of simulations stepped elsewhere (worker processes, remote
+    collectors): kept here, and a change is sent to them by :meth:`_send_teacher_active`."""
+
+    _teacher_active = False
+
+    @property
+    def teacher_active(self) -> bool:
+        """Whether observations carry the teacher's action (set in every worker)."""
+        return self._teacher_active
+
+    @teacher_active.setter
+    def teacher_active(self, active: bool) -> None:
+        if bool(active) != self._teacher_active:
+            self._send_teacher_active(bool(active))
+            self._teacher_active = bool(active)
+
+    def _send_teacher_active(self, active: bool) -> None:
+        """Sets :meth:`BatchedLaneKeepingEnv.set_teacher_active` in every worker."""
+        raise NotImplementedError
+
+
 def merge_sim_states(states: Sequence[dict[str, Any]]) -> dict[str, Any]:
     """One :meth:`BatchedLaneKeepingEnv.sim_state` from the snapshots of consecutive slices
     of the simulations (workers in order): the snapshot one env holding them all would take."""
@@ -411,5 +433,6 @@ def make_env(task: str | Path, *, num_envs: int = 1, observation: str = "pixels"
                                  device=device)
 
 
-__all__ = ["TERMINATIONS", "BatchedLaneKeepingEnv", "make_env", "merge_sim_states",
+__all__ = ["TERMINATIONS", "BatchedLaneKeepingEnv", "MirroredTeacherFlag", "make_env",
+           "merge_sim_states",
            "split_sim_state", "sub_env_seeds"]

@@ -22,10 +22,15 @@ import torch
 from tensordict import TensorDict, TensorDictBase
 from torchrl.envs import EnvBase, ParallelEnv
 
-from crllk.envs.batched import BatchedLaneKeepingEnv, merge_sim_states, split_sim_state
+from crllk.envs.batched import (
+    BatchedLaneKeepingEnv,
+    MirroredTeacherFlag,
+    merge_sim_states,
+    split_sim_state,
+)
 
 
-class ParallelLaneKeepingEnv(EnvBase):
+class ParallelLaneKeepingEnv(MirroredTeacherFlag, EnvBase):
     """``len(worker_kwargs)`` worker processes, each a :class:`BatchedLaneKeepingEnv` built by
     ``create_env_fn(**worker_kwargs[w])`` (every worker with as many simulations), stepped
     together as one env of batch size ``[workers * n]``.
@@ -69,16 +74,8 @@ class ParallelLaneKeepingEnv(EnvBase):
         self.done_spec = _flatten(parallel.done_spec, flat)
 
     # ----- the workers' settings ----------------------------------------------------------
-    @property
-    def teacher_active(self) -> bool:
-        """Whether observations carry the teacher's action (set in every worker)."""
-        return self._teacher_active
-
-    @teacher_active.setter
-    def teacher_active(self, active: bool) -> None:
-        if bool(active) != self._teacher_active:
-            self.parallel.set_teacher_active(bool(active))
-            self._teacher_active = bool(active)
+    def _send_teacher_active(self, active: bool) -> None:
+        self.parallel.set_teacher_active(active)
 
     @property
     def seeds(self) -> list[int]:

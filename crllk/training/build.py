@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib.util
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -9,6 +10,7 @@ import torch
 
 import crllk  # noqa: F401  (chooses the headless GL backend before torchrl imports mujoco)
 from crllk.envs.batched import BatchedLaneKeepingEnv, make_env, sub_env_seeds
+from crllk.envs.distributed import RayClusterError, RayLaneKeepingCollector
 from crllk.envs.parallel import ParallelLaneKeepingEnv
 from crllk.errors import ConfigError
 from crllk.rl.lagrange import Multiplier, make_multiplier
@@ -16,7 +18,7 @@ from crllk.rl.loss import AdvantageModules, LagrangianPPOLoss, make_advantage_mo
 from crllk.rl.models import make_actor, make_critic, make_shared_critic
 from crllk.tasks.constraints import Constraint
 from crllk.tasks.lane_keeping import state_feature_names
-from crllk.training.config import TrainConfig
+from crllk.training.config import CLUSTER_EXTRA, SOURCE, TrainConfig
 
 
 @dataclass
@@ -48,20 +50,35 @@ def build_env(config: TrainConfig, *, num_envs: int, seed: int,
                     commands=config.model.policy_commands)
 
 
-TrainingEnv = BatchedLaneKeepingEnv | ParallelLaneKeepingEnv
-"""The environment a run collects from: one process (``workers=1``) or several."""
+TrainingEnv = BatchedLaneKeepingEnv | ParallelLaneKeepingEnv | RayLaneKeepingCollector
+"""What a run collects from: one process (``workers=1``), several, or remote collectors
+(``collector=ray``)."""
 
 
 def build_training_env(config: TrainConfig) -> TrainingEnv:
-    """The ``num_envs`` training simulations: stepped in this process (``workers=1``), or
-    split among ``workers`` processes through TorchRL's ``ParallelEnv``. Simulation ``i``
-    spawns from the same seed either way."""
+    """The ``num_envs`` training simulations: stepped in this process (``workers=1``), split
+    among ``workers`` processes through TorchRL's ``ParallelEnv``, or among ``workers`` remote
+    collectors (``collector=ray``; started by :func:`build_run`). Simulation ``i`` spawns from
+    the same seed every way.
+
+    Raises:
+        ConfigError: for ``collector=ray`` without Ray installed.
+    """
+    share = config.num_envs // config.workers
+    shares = [{"config": config, "first": w * share, "count": share}
+              for w in range(config.workers)]
+    if config.collector == "ray":
+        if importlib.util.find_spec("ray") is None:
+            raise ConfigError(SOURCE, "collector", f"'ray' needs Ray, from {CLUSTER_EXTRA}")
+        spec_env = build_env(config, num_envs=1, seed=config.seed, training=True)
+        try:
+            return RayLaneKeepingCollector(worker_env, shares, spec_env, num_envs=config.num_envs,
+                                           address=config.ray_address, seed=config.seed)
+        finally:
+            spec_env.close()
     if config.workers == 1:
         return build_env(config, num_envs=config.num_envs, seed=config.seed, training=True)
-    share = config.num_envs // config.workers
-    return ParallelLaneKeepingEnv(
-        worker_env, [{"config": config, "first": w * share, "count": share}
-                     for w in range(config.workers)], num_threads=config.threads)
+    return ParallelLaneKeepingEnv(worker_env, shares, num_threads=config.threads)
 
 
 def worker_env(config: TrainConfig, first: int, count: int) -> BatchedLaneKeepingEnv:
@@ -131,9 +148,28 @@ def build_multipliers(config: TrainConfig, constraints: Sequence[Constraint]
 def build_run(config: TrainConfig) -> tuple[TrainingEnv, Learner, dict[str, Multiplier],
                                             torch.Generator]:
     """Seeds torch and builds the environment, the learner, the multipliers and the generator
-    of minibatch orders, in this order (a resumed run rebuilds them the same way)."""
+    of minibatch orders, in this order (a resumed run rebuilds them the same way); remote
+    collectors start with the learner's policy.
+
+    Raises:
+        ConfigError: if the Ray cluster cannot host the remote collectors.
+    """
     torch.set_num_threads(config.threads)
     torch.manual_seed(config.seed)
     generator = torch.Generator().manual_seed(config.seed)
     env = build_training_env(config)
-    return env, build_learner(config, env), build_multipliers(config, env.constraints), generator
+    learner = build_learner(config, env)
+    multipliers = build_multipliers(config, env.constraints)
+    if isinstance(env, RayLaneKeepingCollector):
+        try:
+            env.start(learner.actor, config.rollout_steps)
+        except RayClusterError as err:
+            env.close()
+            raise ConfigError(SOURCE, err.setting, err.problem) from None
+    return env, learner, multipliers, generator
+
+
+def keeps_snapshots(env: TrainingEnv) -> bool:
+    """Whether checkpoints hold the simulations' state, so that a resumed run continues its
+    episodes exactly (not with remote collectors)."""
+    return getattr(env, "keeps_snapshots", True)

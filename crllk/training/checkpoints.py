@@ -13,7 +13,7 @@ from crllk.envs.episodes import EpisodeAccumulator
 from crllk.errors import ConfigError
 from crllk.files import atomic_write
 from crllk.rl.lagrange import Multiplier, multiplier_from_state
-from crllk.training.build import Learner, TrainingEnv
+from crllk.training.build import Learner, TrainingEnv, keeps_snapshots
 from crllk.training.config import TrainConfig
 
 CHECKPOINT_FORMAT = 2
@@ -49,8 +49,11 @@ def load_checkpoint(path: str | Path) -> dict[str, Any]:
 
 def checkpoint_state(config: TrainConfig, learner: Learner, multipliers: dict[str, Multiplier],
                      episodes: EpisodeAccumulator, env: TrainingEnv,
-                     generator: torch.Generator, carry: TensorDictBase, *, iteration: int,
+                     generator: torch.Generator, carry: TensorDictBase | None, *, iteration: int,
                      frames: int, elapsed: float) -> dict[str, Any]:
+    """What :func:`restore` needs; ``env``, ``carry`` and the running episode sums are None
+    when the simulations' state is not kept (remote collectors)."""
+    snapshots = keeps_snapshots(env)
     return {
         "iteration": iteration, "frames": frames, "elapsed": elapsed,
         "config": OmegaConf.to_container(OmegaConf.structured(config)),
@@ -58,17 +61,20 @@ def checkpoint_state(config: TrainConfig, learner: Learner, multipliers: dict[st
         "critics": {name: critic.state_dict() for name, critic in learner.critics.items()},
         "optimizer": learner.optimizer.state_dict(),
         "multipliers": {name: m.state_dict() for name, m in multipliers.items()},
-        "episodes": episodes.state_dict(),
-        "env": env.sim_state(),
-        "carry": carry.clone(),
+        "episodes": episodes.state_dict() if snapshots else None,
+        "env": env.sim_state() if snapshots else None,
+        "carry": carry.clone() if snapshots else None,
         "torch_rng": torch.get_rng_state(),
         "generator": generator.get_state(),
     }
 
 
 def restore(state: dict[str, Any], learner: Learner, multipliers: dict[str, Multiplier],
-            episodes: EpisodeAccumulator, env: TrainingEnv,
-            generator: torch.Generator) -> None:
+            episodes: EpisodeAccumulator, env: TrainingEnv, generator: torch.Generator) -> bool:
+    """Loads a checkpoint into the run's parts. Returns whether the simulations continue
+    exactly where they were (their state and the running episode sums restored, and
+    ``state["carry"]`` to continue from); if the checkpoint has no simulations' state or
+    ``env`` cannot take one (remote collectors), episodes start afresh."""
     learner.actor.load_state_dict(state["actor"])
     for name, critic in learner.critics.items():
         critic.load_state_dict(state["critics"][name])
@@ -76,7 +82,10 @@ def restore(state: dict[str, Any], learner: Learner, multipliers: dict[str, Mult
     for name in multipliers:
         multipliers[name] = multiplier_from_state(state["multipliers"][name])
     learner.loss.set_multipliers({name: m.value for name, m in multipliers.items()})
-    episodes.load_state_dict(state["episodes"])
-    env.load_sim_state(state["env"])
+    exact = state["env"] is not None and keeps_snapshots(env)
+    if exact:
+        episodes.load_state_dict(state["episodes"])
+        env.load_sim_state(state["env"])
     torch.set_rng_state(state["torch_rng"])
     generator.set_state(state["generator"])
+    return exact

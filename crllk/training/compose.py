@@ -21,7 +21,7 @@ from omegaconf.errors import OmegaConfBaseException
 from crllk.errors import ConfigError
 from crllk.files import read_yaml
 from crllk.paths import task_file, task_names
-from crllk.training.config import SOURCE, register_schema
+from crllk.training.config import CLUSTER_EXTRA, SOURCE, register_schema
 
 CONFIG_MODULE = "crllk.conf"
 CONFIG_NAME = "train"
@@ -67,11 +67,10 @@ def task_paths_as_task_file(overrides: Iterable[str]) -> list[str]:
     return out
 
 
-_CLUSTER_EXTRA = "the cluster extra: pip install -e '.[cluster]'"
 LAUNCHER_PLUGINS = {
     "joblib": ("hydra_plugins.hydra_joblib_launcher", "hydra-joblib-launcher (a dependency)"),
-    "submitit": ("hydra_plugins.hydra_submitit_launcher", _CLUSTER_EXTRA),
-    "ray": ("hydra_plugins.hydra_ray_launcher", _CLUSTER_EXTRA),
+    "submitit": ("hydra_plugins.hydra_submitit_launcher", CLUSTER_EXTRA),
+    "ray": ("hydra_plugins.hydra_ray_launcher", CLUSTER_EXTRA),
 }
 """Hydra launcher families (``hydra/launcher=<family>_<variant>``): the plugin module each
 needs and what installs it."""

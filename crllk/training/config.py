@@ -20,6 +20,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from crllk.rl.models import ModelConfig
 from crllk.settings import (
+    host_port,
     non_negative,
     one_of,
     open_unit_interval,
@@ -38,6 +39,8 @@ SCHEMA_NAME = "train_schema"
 CONF_DIR = Path(__file__).resolve().parent.parent / "conf"
 EVALUATION_SEED = 1_000_000
 """Spawn (and sampling) seed of evaluations, far from every training seed."""
+CLUSTER_EXTRA = "the cluster extra: pip install -e '.[cluster]'"
+"""What installs Ray and the cluster launchers."""
 
 
 @dataclass
@@ -175,7 +178,20 @@ class TrainConfig:
     each, through TorchRL's ParallelEnv; the policy and the PPO update stay in the main
     process). Simulation i spawns from the same seed whatever the number of workers, so a run
     with several workers collects exactly what it would with one, and resumes exactly from its
-    checkpoints (with any number of workers)."""
+    checkpoints (with any number of workers). With collector=ray: the remote collectors."""
+    collector: str = setting("local", check=one_of("local", "ray"))
+    """Where the simulations run. local: on this machine (workers processes). ray: in workers
+    remote collectors of TorchRL's RayCollector (the cluster extra), num_envs/workers
+    simulations each, on the Ray cluster at ray_address; each runs a copy of the policy, which
+    gets the current weights before every iteration, while the PPO update, evaluations,
+    recordings and checkpoints stay in this process. Resume is not exact with ray: the
+    simulators' state lives on the collectors and is not checkpointed, so a resumed run keeps
+    its networks, optimiser, multipliers and counters but starts fresh episodes (the episodes
+    running at the checkpoint are never counted); collector may change on resume."""
+    ray_address: str | None = setting(None, check=host_port)
+    """collector=ray: host:port of the head of the Ray cluster to join (RAY_AUTH_MODE=token
+    when its head was started by ray start); unset: a private Ray instance of this run,
+    listening on 127.0.0.1 only."""
     rollout_steps: int = setting(64, check=positive)
     """Control steps per sub-environment per iteration."""
     reward_scale: float = setting(30.0, check=positive)
@@ -213,6 +229,8 @@ class TrainConfig:
         if self.live != "none" and self.viewer != "none":
             yield "viewer", (f"must be none with live={self.live} (the live view already shows "
                              f"the recordings), got {self.viewer!r}")
+        if self.ray_address is not None and self.collector != "ray":
+            yield "ray_address", f"is only used with collector=ray, got collector={self.collector}"
         if self.num_envs % self.workers:
             yield "workers", (f"must divide num_envs ({self.num_envs}) into equal shares, "
                               f"got {self.workers}")
@@ -277,5 +295,5 @@ def upgrade(stored: DictConfig) -> DictConfig:
     return stored
 
 
-__all__ = ["EVALUATION_SEED", "ConstraintConfig", "TrainConfig", "algo_thresholds",
-           "register_schema", "upgrade", "validate"]
+__all__ = ["CLUSTER_EXTRA", "EVALUATION_SEED", "ConstraintConfig", "TrainConfig",
+           "algo_thresholds", "register_schema", "upgrade", "validate"]

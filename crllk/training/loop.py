@@ -14,7 +14,9 @@ One iteration (:func:`learn`, then the logs):
 
 The checkpoint holds the networks, the optimiser, the multipliers, the counters, the random
 generators, the simulations' full state and the running episode sums, so ``resume=true``
-continues exactly where the uninterrupted run would have been.
+continues exactly where the uninterrupted run would have been. With remote collectors
+(``collector=ray``) the simulations' state stays on the collectors: a resumed run restores the
+rest and starts fresh episodes.
 """
 
 from __future__ import annotations
@@ -32,6 +34,7 @@ from tqdm import tqdm
 
 import crllk  # noqa: F401  (chooses the headless GL backend before torchrl imports mujoco)
 from crllk.envs.batched import BatchedLaneKeepingEnv
+from crllk.envs.distributed import RayLaneKeepingCollector
 from crllk.envs.episodes import EpisodeAccumulator, EpisodeStats, summarise
 from crllk.errors import ConfigError
 from crllk.files import atomic_write_text
@@ -68,6 +71,7 @@ def train(config: TrainConfig) -> Path:
         resuming = prepare_run_dir(config, run_dir, checkpoint_path)
     except ConfigError:
         lock.close()
+        env.close()
         raise
     episodes = EpisodeAccumulator(config.num_envs, constraints)
     metrics = CsvLog(run_dir / "metrics.csv",
@@ -78,16 +82,18 @@ def train(config: TrainConfig) -> Path:
 
     if resuming:
         state = load_checkpoint(checkpoint_path)
-        restore(state, learner, multipliers, episodes, env, generator)
-        carry = state["carry"]
+        exact = restore(state, learner, multipliers, episodes, env, generator)
+        carry = state["carry"] if exact else first_carry(env)
         iteration, frames, elapsed = state["iteration"], state["frames"], state["elapsed"]
         metrics.truncate_after(iteration)
         evaluations.truncate_after(iteration)
-        print(f"resuming {run_dir} at iteration {iteration}, {frames} frames", flush=True)
+        print(f"resuming {run_dir} at iteration {iteration}, {frames} frames"
+              + ("" if exact else " (fresh episodes: the checkpoint holds no simulator state)"),
+              flush=True)
     else:
         run_dir.mkdir(parents=True, exist_ok=True)
         atomic_write_text(run_dir / "config.yaml", OmegaConf.to_yaml(OmegaConf.structured(config)))
-        carry = env.reset()
+        carry = first_carry(env)
         print(f"run directory: {run_dir}", flush=True)
     live = open_live_view(config, run_dir, constraints)
 
@@ -144,13 +150,13 @@ def train(config: TrainConfig) -> Path:
 
 def learn(config: TrainConfig, env: TrainingEnv, learner: Learner,
           multipliers: dict[str, Multiplier], generator: torch.Generator,
-          episodes: EpisodeAccumulator, carry: TensorDictBase, frames: int
-          ) -> tuple[TensorDictBase, TensorDictBase, list[EpisodeStats], dict[str, float]]:
+          episodes: EpisodeAccumulator, carry: TensorDictBase | None, frames: int
+          ) -> tuple[TensorDictBase, TensorDictBase | None, list[EpisodeStats], dict[str, float]]:
     """One iteration of learning after ``frames``: collect ``rollout_steps`` steps of every
     sub-environment, update the multipliers from the episodes that finished, run the PPO
     epochs. Returns the batch, the tensordict to continue from, the finished episodes and the
     mean loss terms."""
-    batch, carry = collect(env, learner.actor, carry, config.rollout_steps)
+    batch, carry = collect_batch(env, learner.actor, carry, config.rollout_steps)
     finished = episodes.add_batch(batch)
     update_multipliers(multipliers, finished)
     learner.loss.set_multipliers({name: m.value for name, m in multipliers.items()})
@@ -161,6 +167,22 @@ def learn(config: TrainConfig, env: TrainingEnv, learner: Learner,
     shape_signals(batch, config, env.config)
     losses = ppo_update(learner, batch, config, generator)
     return batch, carry, finished, losses
+
+
+def first_carry(env: TrainingEnv) -> TensorDictBase | None:
+    """What collection starts from: a reset of every simulation, or None for remote
+    collectors (they reset their own simulations when they start)."""
+    return None if isinstance(env, RayLaneKeepingCollector) else env.reset()
+
+
+def collect_batch(env: TrainingEnv, actor: torch.nn.Module, carry: TensorDictBase | None,
+                  steps: int) -> tuple[TensorDictBase, TensorDictBase | None]:
+    """``steps`` steps of every simulation with the stochastic policy (the transitions
+    ``[num_envs, steps]``) and what to continue from: :func:`crllk.rl.rollout.collect` from
+    ``carry``, or a batch of the remote collectors with the policy's current weights."""
+    if isinstance(env, RayLaneKeepingCollector):
+        return env.collect(actor, steps), None
+    return collect(env, actor, carry, steps)
 
 
 def prepare_run_dir(config: TrainConfig, run_dir: Path, checkpoint_path: Path) -> bool:
