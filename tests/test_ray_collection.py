@@ -70,9 +70,9 @@ def test_collector_ray_without_ray_names_the_cluster_extra(tmp_path, monkeypatch
     assert not (tmp_path / "run").exists()
 
 
+@pytest.mark.slow  # needs the cluster extra, which make test-slow installs
 def test_a_ray_address_where_nothing_answers_is_one_line(tmp_path):
     """A port nobody listens on: one line naming ray_address, at once, no run directory."""
-    pytest.importorskip("ray")  # the cluster extra
     address = f"127.0.0.1:{ray_cluster.free_port()}"
     with pytest.raises(ConfigError) as error:
         run_in_process(tmp_path / "run", 1, [*STATE, "collector=ray", "workers=2",
