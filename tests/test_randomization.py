@@ -14,7 +14,7 @@ import pytest
 import torch
 from test_env_state import assert_identical, drive, random_actions
 
-from crllk.envs.batched import BatchedLaneKeepingEnv, make_env
+from crllk.envs.batched import BatchedLaneKeepingEnv, make_env, sub_env_seeds
 from crllk.errors import ConfigError
 from crllk.sim import constants as C
 from crllk.sim.camera_effects import add_noise, compress
@@ -158,6 +158,44 @@ def test_off_is_bit_identical_to_before(build):
         poses.append([list(p.pose()) for p in env.physics])
     assert frames == reference["frames"]
     assert poses == reference["poses"]
+
+
+def frame_hash(frames: np.ndarray) -> str:
+    return hashlib.sha256(np.ascontiguousarray(frames).tobytes()).hexdigest()
+
+
+def randomized_frame_hashes() -> dict[str, list[str]]:
+    """Hashes of the frames, with ``randomize=default``, of a batched env (resets, and a
+    snapshot restored into another env half-way) and of ``crllk.load`` (resets included)."""
+    env = make_env("small_loop", num_envs=3, seed=3, overrides=DEFAULT)
+    actions = random_actions(env, 60, torch.Generator().manual_seed(5))
+    tensordict = env.reset()
+    batched = [frame_hash(tensordict["pixels"].numpy())]
+    first, carried = drive(env, actions[:25], tensordict)
+    restored = make_env("small_loop", num_envs=3, seed=99, overrides=DEFAULT)
+    restored.reset()
+    restored.load_sim_state(env.sim_state())
+    second, _ = drive(restored, actions[25:], carried)
+    for part in (first, second):
+        frames = part["next", "pixels"].numpy()
+        batched += [frame_hash(frames[:, t]) for t in range(frames.shape[1])]
+    env.close()
+    restored.close()
+    single_env = load("small_loop", seed=sub_env_seeds(3, 3)[1], overrides=DEFAULT)
+    single = [frame_hash(single_env.reset().observation["pixels"])]
+    for step in range(45):
+        timestep = single_env.step(step % 3)
+        single.append(frame_hash(timestep.observation["pixels"]))
+        if timestep.last():
+            single.append(frame_hash(single_env.reset().observation["pixels"]))
+    single_env.physics.free_renderers()
+    return {"batched": batched, "single": single}
+
+
+def test_randomized_frames_are_the_recorded_ones():
+    """Frames recorded with the per-frame camera effects the vectorised ones replaced."""
+    reference = json.loads((DATA / "randomized_small_loop.json").read_text())
+    assert randomized_frame_hashes() == reference
 
 
 def test_camera_effects():
