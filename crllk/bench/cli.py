@@ -7,7 +7,9 @@ Bounds: a state-observation environment step should cost at most twice
 the raw MuJoCo physics of one control step (ratio >= 0.5); a pixel environment step at most
 1/0.6 of the raw physics-plus-render of the same scene (ratio >= 0.6) and the pixel environment
 should reach 1,000 steps/s on 2 cores; with ``randomize=default`` pixel steps should keep 90 %
-of their rate without. ``--workers 1 2`` times collection (policy in this process, simulations
+of their rate without, for one environment and for the batched one (each pair timed in turns,
+in short chunks; each figure the median of its chunks', so that bursts of load from other
+processes hardly count). ``--workers 1 2`` times collection (policy in this process, simulations
 in that many worker processes) and whole training iterations for each worker count, each
 against the first count's figure (no target: the ratio is the speed-up); with ``--overrides
 collector=ray`` the simulations and the policy run in that many remote collectors of a private
@@ -16,12 +18,15 @@ Ray instance (or of the cluster at ``ray_address=host:port``).
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 from crllk.bench.rates import (
     env_rate,
+    env_stepper,
+    paired_rates,
     print_row,
     raw_physics_rate,
     raw_render_rate,
@@ -81,20 +86,12 @@ def main(argv: Sequence[str] | None = None) -> None:
     print_row("raw MuJoCo physics (8 substeps)", raw)
     print_row("raw physics + camera render", render)
     print_row("env, state observations", env_rate(args.task, "state", args.steps), raw, 0.5)
-    pixels = env_rate(args.task, "pixels", args.steps)
+    pixels, randomized = paired_rates(functools.partial(env_stepper, args.task, "pixels"),
+                                      args.steps, RANDOMIZED)
     print_row("env, pixel observations", pixels, render, 0.6)
-    print_row("env, pixels, randomize=default", env_rate(args.task, "pixels", args.steps,
-              overrides=RANDOMIZED), pixels, RANDOMIZED_TARGET)
+    print_row("env, pixels, randomize=default", randomized, pixels, RANDOMIZED_TARGET)
     if args.batched:
-        from crllk.bench.envs import batched_env_rate
-
-        steps = max(1, args.steps // args.num_envs)
-        for observation, bound, target in (("state", raw, 0.5), ("pixels", render, 0.6)):
-            rate = batched_env_rate(args.task, observation, args.num_envs, steps)
-            print_row(f"make_env {observation}, num_envs={args.num_envs}", rate, bound, target)
-        rate = batched_env_rate(args.task, "pixels", args.num_envs, steps, overrides=RANDOMIZED)
-        print_row(f"make_env pixels, randomize=default, num_envs={args.num_envs}", rate,
-                  batched_env_rate(args.task, "pixels", args.num_envs, steps), RANDOMIZED_TARGET)
+        print_batched_figures(args.task, args.num_envs, args.steps, raw, render)
     if training_configs:
         from crllk.bench.training import training_rates
 
@@ -129,6 +126,23 @@ def training_bench_configs(task: str, overrides: Sequence[str]) -> list[TrainCon
         raise ConfigError("--overrides", "collector", "--training times local collection; time "
                           "collector=ray with --workers")
     return configs
+
+
+def print_batched_figures(task: str, num_envs: int, steps: int, raw: float,
+                          render: float) -> None:
+    """The batched env's frames/s with state and pixel observations against their raw bounds,
+    and with ``randomize=default`` against the pixel figure timed in turns with it."""
+    from crllk.bench.envs import batched_env_rate, batched_stepper
+
+    batched_steps = max(1, steps // num_envs)
+    state = batched_env_rate(task, "state", num_envs, batched_steps)
+    print_row(f"make_env state, num_envs={num_envs}", state, raw, 0.5)
+    pixels, randomized = paired_rates(
+        functools.partial(batched_stepper, task, "pixels", num_envs), batched_steps, RANDOMIZED)
+    pixels, randomized = pixels * num_envs, randomized * num_envs
+    print_row(f"make_env pixels, num_envs={num_envs}", pixels, render, 0.6)
+    print_row(f"make_env pixels, randomize=default, num_envs={num_envs}", randomized, pixels,
+              RANDOMIZED_TARGET)
 
 
 def worker_bench_configs(task: str, workers: Sequence[int], observations: Sequence[str],

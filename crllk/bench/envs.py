@@ -11,17 +11,17 @@ of the targets (state >= 0.5, pixels >= 0.6).
 
 from __future__ import annotations
 
-import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import torch
 
-from crllk.bench.rates import raw_physics_rate, raw_render_rate
+from crllk.bench.rates import ACTION_CYCLE, rate_of, raw_physics_rate, raw_render_rate
 from crllk.cli import Parser, positive_int, run
 from crllk.envs.batched import make_env
 
-_WARMUP_STEPS = 10
+WARMUP_STEPS = 10
+"""Batched steps made before timing a batched figure."""
 
 
 def batched_env_rate(task: str, observation: str, num_envs: int, steps: int,
@@ -29,21 +29,31 @@ def batched_env_rate(task: str, observation: str, num_envs: int, steps: int,
     """Frames/s (``steps * num_envs`` over the time) of ``make_env(task, num_envs=...)``
     (task settings ``overrides``) stepped with uniformly random discrete actions and TorchRL
     auto-reset."""
+    step, close = batched_stepper(task, observation, num_envs, seed, overrides)
+    rate = rate_of(step, steps, WARMUP_STEPS)
+    close()
+    return rate * num_envs
+
+
+def batched_stepper(task: str, observation: str, num_envs: int, seed: int = 0,
+                    overrides: dict[str, Any] | None = None) -> tuple[Callable[[], None],
+                                                                      Callable[[], None]]:
+    """A function that steps ``make_env(task, num_envs=...)`` (task settings ``overrides``)
+    once with uniformly random discrete actions and TorchRL auto-reset, and one that closes
+    the env."""
     env = make_env(task, num_envs=num_envs, observation=observation, action="discrete",
                    seed=seed, overrides=overrides)
     generator = torch.Generator().manual_seed(seed)
-    actions = torch.randint(0, 3, (steps + _WARMUP_STEPS, num_envs), generator=generator)
-    tensordict = env.reset()
-    for k in range(_WARMUP_STEPS):
-        tensordict["action"] = actions[k]
+    actions = torch.randint(0, 3, (ACTION_CYCLE, num_envs), generator=generator)
+    tensordict, count = env.reset(), 0
+
+    def step() -> None:
+        nonlocal tensordict, count
+        tensordict["action"] = actions[count % ACTION_CYCLE]
         _, tensordict = env.step_and_maybe_reset(tensordict)
-    start = time.perf_counter()
-    for k in range(_WARMUP_STEPS, _WARMUP_STEPS + steps):
-        tensordict["action"] = actions[k]
-        _, tensordict = env.step_and_maybe_reset(tensordict)
-    elapsed = time.perf_counter() - start
-    env.close()
-    return steps * num_envs / elapsed
+        count += 1
+
+    return step, env.close
 
 
 def main(argv: Sequence[str] | None = None) -> None:
