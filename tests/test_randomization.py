@@ -1,6 +1,6 @@
 """Per-episode domain randomisation (``randomize``): seeded draws within their ranges, visible
-in the images, the camera pose and the motion, restored exactly from snapshots, and nothing
-changed when it is off."""
+in the images, the camera pose and the motion, restored exactly from snapshots, nothing changed
+when it is off, and the camera effects of a batch of frames exactly those of each frame alone."""
 
 from __future__ import annotations
 
@@ -12,12 +12,22 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
+from tensordict import TensorDictBase
 from test_env_state import assert_identical, drive, random_actions
 
 from crllk.envs.batched import BatchedLaneKeepingEnv, make_env, sub_env_seeds
 from crllk.errors import ConfigError
 from crllk.sim import constants as C
-from crllk.sim.camera_effects import add_noise, compress
+from crllk.sim.camera_effects import (
+    FrameEffects,
+    add_noise,
+    add_noise_frames,
+    apply_effects,
+    compress,
+    compress_frames,
+    noise_bank,
+    quantisation_steps,
+)
 from crllk.sim.motor import MotorConfig
 from crllk.tasks.config import load_task_config
 from crllk.tasks.lane_keeping import load
@@ -239,3 +249,110 @@ def test_bad_randomize_is_one_line_naming_file_and_field(tmp_path, value, field,
 def test_none_and_null_are_off():
     for value in ("none", None, {"camera_pitch": None}):
         assert load_task_config("small_loop", {"randomize": value}).randomize is None
+
+
+def reference_compress(image: np.ndarray, quality: int) -> np.ndarray:
+    """:func:`compress` one frame at a time, written out plainly: padding, RGB to YCbCr, the
+    8x8 DCT along x then y, quantisation and back, each a 2-D product as the library's."""
+    height, width, _ = image.shape
+    padded = np.pad(image, ((0, -height % 8), (0, -width % 8), (0, 0)), mode="edge")
+    rows, cols = padded.shape[0] // 8, padded.shape[1] // 8
+    to_ycc = np.array([[0.299, 0.587, 0.114], [-0.168736, -0.331264, 0.5],
+                       [0.5, -0.418688, -0.081312]])
+    k, n = np.arange(8)[:, None], np.arange(8)[None, :]
+    dct = np.cos(math.pi * (2 * n + 1) * k / 16) * math.sqrt(2 / 8)
+    dct[0] /= math.sqrt(2)
+    dct = dct.astype(np.float32)
+
+    def product(array, matrix):
+        return (array.reshape(-1, array.shape[-1]) @ matrix).reshape(*array.shape[:-1], -1)
+
+    ycc = product(padded.astype(np.float32) - np.float32(128), to_ycc.T.astype(np.float32))
+    blocks = ycc.reshape(rows, 8, cols, 8, 3).transpose(0, 2, 4, 1, 3)  # [.., y, x]
+    coefficients = product(product(blocks, dct.T).swapaxes(-1, -2), dct.T)  # [.., u, v]
+    steps = quantisation_steps(quality)
+    coefficients = np.round(coefficients / steps) * steps
+    blocks = product(product(coefficients, dct).swapaxes(-1, -2), dct)  # [.., y, x]
+    ycc = blocks.transpose(0, 3, 1, 4, 2).reshape(rows * 8, cols * 8, 3)[:height, :width]
+    rgb = product(ycc, np.linalg.inv(to_ycc).astype(np.float32).T) + np.float32(128.5)
+    return np.clip(rgb, 0, 255).astype(np.uint8)
+
+
+def reference_noise(image: np.ndarray, std: float, seed: int, frame: int) -> np.ndarray:
+    """:func:`add_noise` written out plainly: a bank frame rotated by the key."""
+    key = (seed * 0x9E3779B1 + frame * 0x85EBCA6B) & 0xFFFFFFFF
+    row = noise_bank(image.size)[key % 64]
+    noise = np.roll(row, -((key >> 8) % image.size)) * np.float32(std)
+    return np.clip(noise + image.reshape(-1) + np.float32(0.5), 0, 255).astype(np.uint8) \
+        .reshape(image.shape)
+
+
+@pytest.mark.parametrize(("count", "height", "width"), [(1, 30, 40), (9, 30, 40), (17, 30, 40),
+                                                        (5, 13, 21), (3, 64, 48)])
+def test_batched_camera_effects_are_each_frame_s_own(count, height, width):
+    """Frames compressed and noised together (over several chunks, each at its own quality
+    and key) are bit for bit what each frame gets alone, from the plain reference."""
+    rng = np.random.default_rng(count)
+    smooth = np.linspace(0, 255, height * width * 3).reshape(height, width, 3)
+    images = np.clip(smooth + rng.normal(0, 40, (count, height, width, 3)), 0, 255) \
+        .astype(np.uint8)
+    images[0] = rng.integers(0, 256, (height, width, 3))
+    qualities = rng.integers(1, 101, count).tolist()
+    stds = rng.uniform(0.0, 6.0, count).tolist()
+    seeds, frames = rng.integers(0, 2**31, count).tolist(), rng.integers(0, 600, count).tolist()
+    compressed = compress_frames(images, qualities)
+    noisy = add_noise_frames(images, stds, seeds, frames)
+    effects = [None if k % 4 == 3 else FrameEffects(qualities[k] * (k % 4 != 1),
+                                                    stds[k] * (k % 4 != 2), seeds[k], frames[k])
+               for k in range(count)]
+    both = apply_effects(images, effects)
+    for k, image in enumerate(images):
+        assert np.array_equal(compressed[k], reference_compress(image, qualities[k]))
+        assert np.array_equal(noisy[k], reference_noise(image, stds[k], seeds[k], frames[k]))
+        expected = image
+        if effects[k] is not None and effects[k].quality:
+            expected = compress(expected, effects[k].quality)
+        if effects[k] is not None and effects[k].noise_std > 0:
+            expected = add_noise(expected, stds[k], seeds[k], frames[k])
+        assert np.array_equal(both[k], expected)
+
+
+def assert_frames_are_per_frame_effects(env: BatchedLaneKeepingEnv, pixels: torch.Tensor) -> None:
+    """Each simulation's observed frame is its camera image now with its episode's effects
+    applied to it alone (per-frame :func:`compress` and :func:`add_noise`)."""
+    for k, (physics, task) in enumerate(zip(env.physics, env.tasks, strict=True)):
+        variation = task.variation
+        expected = compress(task.camera_image(physics), variation.jpeg_quality)
+        if variation.noise_std > 0:
+            expected = add_noise(expected, variation.noise_std, variation.noise_seed,
+                                 task.episode.steps)
+        assert np.array_equal(pixels[k].numpy(), expected), (k, task.episode.steps)
+
+
+def drive_checking_effects(env: BatchedLaneKeepingEnv, actions: torch.Tensor,
+                           tensordict: TensorDictBase) -> tuple[TensorDictBase, int]:
+    """Step through ``actions`` with automatic resets, checking every frame observed with
+    :func:`assert_frames_are_per_frame_effects`: the tensordict to carry on from and the number
+    of episodes that ended."""
+    ended = 0
+    for action in actions:
+        tensordict["action"] = action
+        step, tensordict = env.step_and_maybe_reset(tensordict)
+        ended += int(step["next", "done"].sum())
+        assert_frames_are_per_frame_effects(env, tensordict["pixels"])
+    return tensordict, ended
+
+
+def test_batched_frames_are_per_frame_effects_across_resets_and_restores(build):
+    """The batched env's randomised frames (effects applied to all simulations at once) match
+    per-frame effects on each simulation's render, through resets and a restored snapshot."""
+    env = build(DEFAULT, num_envs=4, seed=2)
+    actions = random_actions(env, 50, torch.Generator().manual_seed(4))
+    tensordict = env.reset()
+    assert_frames_are_per_frame_effects(env, tensordict["pixels"])
+    tensordict, _ = drive_checking_effects(env, actions[:20], tensordict)
+    restored = build(DEFAULT, num_envs=4, seed=98)
+    restored.reset()
+    restored.load_sim_state(env.sim_state())
+    _, ended = drive_checking_effects(restored, actions[20:], tensordict)
+    assert ended >= 4, "every episode ends (horizon 30) after the snapshot"

@@ -47,6 +47,7 @@ from tensordict import TensorDict, TensorDictBase
 from torchrl.data import Bounded, Categorical, Composite, TensorSpec, Unbounded
 from torchrl.envs import EnvBase
 
+from crllk.sim.camera_effects import apply_effects
 from crllk.sim.physics import Physics
 from crllk.tasks.config import TaskConfig, load_task_config
 from crllk.tasks.follower import FollowerGains
@@ -202,6 +203,7 @@ class BatchedLaneKeepingEnv(EnvBase):
             indices = mask.reshape(self.num_envs).nonzero().flatten().tolist()
         for i in indices:
             self._reset_one(i)
+        self._apply_camera_effects(indices)
         false = torch.zeros((self.num_envs, 1), dtype=torch.bool)
         out = {**self._observation_entries(), **{key: false.clone() for key in DONE_KEYS},
                "termination": torch.zeros((self.num_envs, 1), dtype=torch.int64)}
@@ -215,14 +217,28 @@ class BatchedLaneKeepingEnv(EnvBase):
         self.step_counts[i] = 0
 
     def _observe(self, i: int, physics: Physics, task: LaneKeeping) -> None:
-        """Store sub-environment ``i``'s observation (and privileged state features)."""
-        self._observations[i] = task.main_observation(physics)
+        """Store sub-environment ``i``'s observation (and privileged state features); a camera
+        image without its effects (:meth:`_apply_camera_effects` adds them)."""
+        if self.observation_type == "pixels":
+            self._observations[i] = task.camera_image(physics)
+        else:
+            self._observations[i] = task.state_feature_list(physics)
         if self.privileged_state:
             self._states[i] = task.state_feature_list(physics)
         if self.reports_commands:
             self._commands[i] = [value for duty in task.command_history for value in duty]
         if self.teacher_active and self.teachers:
             self._teacher_actions[i] = self.teachers[i].action(physics)
+
+    def _apply_camera_effects(self, indices: Sequence[int]) -> None:
+        """The camera effects of the episodes of sub-environments ``indices`` (randomised JPEG
+        compression and sensor noise) on their stored images, in one vectorised call."""
+        if self.observation_type != "pixels":
+            return
+        effects = [self.tasks[i].frame_effects() for i in indices]
+        if any(effect is not None for effect in effects):
+            chosen = list(indices)
+            self._observations[chosen] = apply_effects(self._observations[chosen], effects)
 
     def _observation_entries(self) -> dict[str, torch.Tensor]:
         entries = {self.observation_type: torch.from_numpy(self._observations.copy())}
@@ -250,6 +266,7 @@ class BatchedLaneKeepingEnv(EnvBase):
         for i, (physics, task) in enumerate(zip(self.physics, self.tasks, strict=True)):
             task.after_step(physics)
             self._observe(i, physics, task)
+        self._apply_camera_effects(range(self.num_envs))
         self.step_counts += 1
         return self._tensordict(self._step_outputs([task.outcome for task in self.tasks]))
 

@@ -151,43 +151,81 @@ def camera_pose(variation: SceneVariation) -> tuple[np.ndarray, np.ndarray]:
     return position, quat
 
 
+@dataclass(frozen=True)
+class Appearance:
+    """The values :func:`apply_appearance` writes for one variation, computed once: writing
+    them is a few array copies (the shared model of a batched env takes each simulation's in
+    turn before every render)."""
+
+    light_dir: np.ndarray
+    light_diffuse: np.ndarray
+    head_ambient: np.ndarray
+    head_diffuse: np.ndarray
+    floor_rgb: np.ndarray
+    floor_emission: float
+    geoms: np.ndarray
+    """Ids of the geoms whose colour is written: the surroundings, then the objects'."""
+    geom_rgb: np.ndarray
+    """Their RGB (float32, one row per geom)."""
+    cam_pos: np.ndarray
+    cam_quat: np.ndarray
+    cam_fovy: float
+
+
 def apply_appearance(model: mujoco.MjModel, targets: VariationTargets,
                      variation: SceneVariation | None) -> None:
     """Write the lights, colours and camera of ``variation`` into ``model`` (None: the
     compiled values). Lights and cameras take effect once ``mj_camlight`` has run."""
+    write_appearance(model, targets, appearance(targets, variation))
+
+
+def write_appearance(model: mujoco.MjModel, targets: VariationTargets,
+                     values: Appearance) -> None:
+    """Write :func:`appearance` values into ``model``."""
+    model.light_dir[targets.sun] = values.light_dir
+    model.light_diffuse[targets.sun] = values.light_diffuse
+    model.vis.headlight.ambient = values.head_ambient
+    model.vis.headlight.diffuse = values.head_diffuse
+    model.mat_rgba[targets.floor, :3] = values.floor_rgb
+    model.mat_emission[targets.floor] = values.floor_emission
+    model.geom_rgba[values.geoms, :3] = values.geom_rgb
+    model.cam_pos[targets.camera] = values.cam_pos
+    model.cam_quat[targets.camera] = values.cam_quat
+    model.cam_fovy[targets.camera] = values.cam_fovy
+
+
+@functools.lru_cache(maxsize=256)
+def appearance(targets: VariationTargets, variation: SceneVariation | None) -> Appearance:
+    """What :func:`apply_appearance` writes for ``variation`` (None: the compiled values)."""
     t = targets
     if variation is None:
-        model.light_diffuse[t.sun] = t.sun_diffuse
-        model.light_dir[t.sun] = t.light_dir
-        model.vis.headlight.ambient = t.head_ambient
-        model.vis.headlight.diffuse = t.head_diffuse
-        model.mat_rgba[t.floor] = t.floor_rgba
-        model.mat_emission[t.floor] = t.floor_emission
-        model.geom_rgba[t.surroundings] = t.surroundings_rgba
-        for ids, rgba in zip(t.object_geoms, t.object_rgba, strict=True):
-            model.geom_rgba[ids] = rgba
-        model.cam_pos[t.camera] = t.cam_pos
-        model.cam_quat[t.camera] = t.cam_quat
-        model.cam_fovy[t.camera] = t.cam_fovy
-        return
+        return Appearance(
+            t.light_dir, t.sun_diffuse, t.head_ambient, t.head_diffuse, t.floor_rgba[:3],
+            t.floor_emission, *_geom_colours(t, t.surroundings_rgba[:3],
+                                             [rgba[:, :3] for rgba in t.object_rgba]),
+            t.cam_pos, t.cam_quat, t.cam_fovy)
     v = variation
     direction = np.asarray(v.light_direction, dtype=float)
-    model.light_dir[t.sun] = direction / np.linalg.norm(direction)
-    model.light_diffuse[t.sun] = t.sun_diffuse * v.light_intensity
-    model.vis.headlight.ambient = t.head_ambient * v.ambient
-    model.vis.headlight.diffuse = t.head_diffuse * v.headlight
     floor = np.asarray(v.floor_color)
     scale = max(float(floor.max()), 1.0)  # colours saturate at 1: brighter is emission
-    model.mat_rgba[t.floor, :3] = t.floor_rgba[:3] * floor / scale
-    model.mat_emission[t.floor] = t.floor_emission + (scale - 1.0) * FLOOR_LIGHTING
-    model.geom_rgba[t.surroundings, :3] = np.minimum(
-        t.surroundings_rgba[:3] * np.asarray(v.horizon_color), 1.0)
-    for ids, rgba, color in zip(t.object_geoms, t.object_rgba, v.object_colors, strict=False):
-        model.geom_rgba[ids, :3] = np.minimum(rgba[:, :3] * np.asarray(color), 1.0)
+    horizon = np.minimum(t.surroundings_rgba[:3] * np.asarray(v.horizon_color), 1.0)
+    objects = [np.minimum(rgba[:, :3] * np.asarray(color), 1.0)
+               for rgba, color in zip(t.object_rgba, v.object_colors, strict=False)]
     position, quat = camera_pose(v)
-    model.cam_pos[t.camera] = position
-    model.cam_quat[t.camera] = quat
-    model.cam_fovy[t.camera] = v.camera_fovy
+    return Appearance(
+        direction / np.linalg.norm(direction), t.sun_diffuse * v.light_intensity,
+        t.head_ambient * v.ambient, t.head_diffuse * v.headlight,
+        (t.floor_rgba[:3] * floor / scale).astype(np.float32),
+        t.floor_emission + (scale - 1.0) * FLOOR_LIGHTING,
+        *_geom_colours(t, horizon, objects), position, quat, v.camera_fovy)
+
+
+def _geom_colours(targets: VariationTargets, surroundings: np.ndarray,
+                  objects: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """Geom ids and float32 RGB rows: the surroundings', then the first ``len(objects)``
+    objects' (the others keep what the model holds)."""
+    ids = [np.array([targets.surroundings]), *targets.object_geoms[:len(objects)]]
+    return np.concatenate(ids), np.concatenate([surroundings[None], *objects]).astype(np.float32)
 
 
 def apply_dynamics(model: mujoco.MjModel, targets: VariationTargets,

@@ -28,7 +28,7 @@ from crllk.maps.lanes import LANE_OFFSET
 from crllk.maps.markings import white_lateral
 from crllk.maps.obstacles import ObstacleIndex, footprint_points
 from crllk.sim import constants as C
-from crllk.sim.camera_effects import add_noise, compress
+from crllk.sim.camera_effects import FrameEffects, add_noise, compress
 from crllk.sim.physics import Physics, check_points
 from crllk.sim.variation import SceneVariation
 from crllk.tasks.actions import ACTIONS, action_duty
@@ -367,16 +367,20 @@ class LaneKeeping(base.Task):
     def main_observation(self, physics: Physics) -> np.ndarray | list[float]:
         """The camera image (uint8 HxWx3) or the state features (a list of floats)."""
         if self.observation_type == "pixels":
-            cam = self.config.camera
-            if cam.robot_frames:
-                image = robot_camera_image(physics.render_camera, (cam.height, cam.width))
-            else:
-                image = physics.render_camera(cam.height, cam.width, cam.supersample)
+            image = self.camera_image(physics)
             return image if self.variation is None else self._camera_effects(image)
         return self.state_feature_list(physics)
 
+    def camera_image(self, physics: Physics) -> np.ndarray:
+        """The camera image (uint8 HxWx3) before the episode's camera effects."""
+        cam = self.config.camera
+        if cam.robot_frames:
+            return robot_camera_image(physics.render_camera, (cam.height, cam.width))
+        return physics.render_camera(cam.height, cam.width, cam.supersample)
+
     def _camera_effects(self, image: np.ndarray) -> np.ndarray:
-        """The episode's JPEG compression and sensor noise (this step's frame) on ``image``."""
+        """The episode's JPEG compression and sensor noise (this step's frame) on ``image``
+        (one frame: the batched env applies :meth:`frame_effects` to all its frames at once)."""
         variation = self.variation
         if variation.jpeg_quality:
             image = compress(image, variation.jpeg_quality)
@@ -384,6 +388,15 @@ class LaneKeeping(base.Task):
             image = add_noise(image, variation.noise_std, variation.noise_seed,
                               self.episode.steps)
         return image
+
+    def frame_effects(self) -> FrameEffects | None:
+        """The episode's JPEG compression and sensor noise on this step's frame (None:
+        without randomisation)."""
+        variation = self.variation
+        if variation is None:
+            return None
+        return FrameEffects(variation.jpeg_quality, variation.noise_std, variation.noise_seed,
+                            self.episode.steps)
 
     def obstacle_features(self, pose: LanePose) -> list[float]:
         """For each of the :data:`OBSTACLES_REPORTED` nearest obstacles on the road ahead
