@@ -4,6 +4,7 @@ when it is off, and the camera effects of a batch of frames exactly those of eac
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import json
 import math
@@ -29,9 +30,11 @@ from crllk.sim.camera_effects import (
     quantisation_steps,
 )
 from crllk.sim.motor import MotorConfig
+from crllk.sim.physics import Physics
+from crllk.sim.variation import SceneVariation
 from crllk.tasks.config import load_task_config
 from crllk.tasks.lane_keeping import load
-from crllk.tasks.randomization import PRESETS, draw_variation
+from crllk.tasks.randomization import DISTRACTOR_HALF_SIDES, PRESETS, draw_variation
 
 DATA = Path(__file__).parent / "data"
 DEFAULT = {"randomize": "default", "horizon": 30}
@@ -229,6 +232,9 @@ def test_camera_effects():
     ({"jpeg_quality": [10, 120]}, "randomize.jpeg_quality", "must be <= 100"),
     ({"max_speed": [0, 1]}, "randomize.max_speed", "multiplier must be > 0"),
     ({"floor_color": 1.1}, "randomize.floor_color", "expected [low, high]"),
+    ({"distractors": -1}, "randomize.distractors", "whole number >= 0"),
+    ({"distractors": 2.5}, "randomize.distractors", "whole number >= 0"),
+    ({"distractors": True}, "randomize.distractors", "whole number >= 0"),
     (3, "randomize", "expected none"),
 ])
 def test_bad_randomize_is_one_line_naming_file_and_field(tmp_path, value, field, problem):
@@ -356,3 +362,79 @@ def test_batched_frames_are_per_frame_effects_across_resets_and_restores(build):
     restored.load_sim_state(env.sim_state())
     _, ended = drive_checking_effects(restored, actions[20:], tensordict)
     assert ended >= 4, "every episode ends (horizon 30) after the snapshot"
+
+
+# ----- distractors ----------------------------------------------------------------------------
+DISTRACTED = {"randomize": {"preset": "default", "distractors": 40}, "horizon": 30}
+
+
+def test_offroad_cells_are_the_cells_beside_the_road():
+    dmap = load_task_config("small_loop").map
+    cells = dmap.offroad_cells()
+    half = dmap.tile_size / 2
+    assert len(cells) == 5 * 5 - len(dmap.road_tiles)  # 3x3 map and a ring of one cell
+    assert not any(dmap.is_road(x + half, y + half) for x, y in cells)
+    assert (dmap.tile_size, dmap.tile_size) in cells  # the centre tile
+
+
+def test_distractors_are_drawn_last_in_off_road_cells():
+    config = PRESETS["default"]
+    with_patches = dataclasses.replace(config, distractors=6)
+    dmap = load_task_config("small_loop").map
+    cells, size = dmap.offroad_cells(), dmap.tile_size
+    plain = [draw_variation(config, MotorConfig(), 3, np.random.RandomState(k))
+             for k in range(50)]
+    drawn = [draw_variation(with_patches, MotorConfig(), 3, np.random.RandomState(k), cells,
+                            size) for k in range(50)]
+    for before, after in zip(plain, drawn, strict=True):
+        assert dataclasses.replace(after, distractors=()) == before  # the other draws unchanged
+        assert len(after.distractors) == 6
+        for x, y, _, half_length, half_width, *rgb in after.distractors:
+            assert any(x0 <= x <= x0 + size and y0 <= y <= y0 + size for x0, y0 in cells)
+            low, high = DISTRACTOR_HALF_SIDES
+            assert low <= half_length <= high and low <= half_width <= high
+            assert all(0.0 <= c <= 1.0 for c in rgb)
+        assert SceneVariation.from_dict(after.as_dict()) == after
+
+
+def test_a_distractor_in_view_shows_and_each_shared_model_user_sees_its_own():
+    dmap = load_task_config("small_loop").map
+    first = Physics.from_map(dmap, distractors=1)
+    second = first.copy(share_model=True)
+    second._renderers = first._renderers
+    x, y, yaw = 0.29, 0.8, math.pi / 2  # west lane of the loop, facing north
+    for physics in (first, second):
+        physics.set_pose(x, y, yaw)
+        physics.forward()
+    red = ((x, y + 0.3, 0.0, 0.06, 0.06, 1.0, 0.0, 0.0),)  # on the road, straight ahead
+    first.set_variation(SceneVariation(distractors=red))
+    second.set_variation(SceneVariation())
+
+    def redness(physics):
+        image = physics.render_camera(30, 40, 2).astype(int)
+        return int(((image[..., 0] - image[..., 1:].max(-1)) > 80).sum())
+
+    shown, hidden = redness(first), redness(second)
+    assert shown > 10 and hidden == 0
+    assert redness(first) == shown  # after the other simulation rewrote the shared model
+
+
+def test_distractors_change_frames_only_and_restore_exactly(build):
+    plain, distracted = build(DEFAULT, seed=4), build(DISTRACTED, seed=4)
+    generator = torch.Generator().manual_seed(2)
+    actions = random_actions(plain, 20, generator)
+    expected, _ = drive(plain, actions, plain.reset())
+    got, carried = drive(distracted, actions, distracted.reset())
+    assert not torch.equal(got["next", "pixels"], expected["next", "pixels"])
+    done = torch.cat([got["next", "done"], expected["next", "done"]]).reshape(-1, 20).any(0)
+    first_done = int(done.nonzero()[0]) if done.any() else 20
+    assert torch.equal(got["next", "reward"][:, :first_done],
+                       expected["next", "reward"][:, :first_done])  # patches touch nothing
+    snapshot = distracted.sim_state()
+    tail = random_actions(distracted, 25, generator)
+    following, _ = drive(distracted, tail, carried.clone())
+    restored = build(DISTRACTED, seed=99)
+    restored.reset()
+    restored.load_sim_state(snapshot)
+    again, _ = drive(restored, tail, carried.clone())
+    assert_identical(again, following, "pixels")

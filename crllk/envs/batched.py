@@ -59,7 +59,7 @@ from crllk.tasks.lane_keeping import (
     command_history_length,
     state_feature_names,
 )
-from crllk.tasks.randomization import max_delay
+from crllk.tasks.randomization import distractor_count, max_delay
 from crllk.tasks.teacher import Teacher
 
 DONE_KEYS = ("done", "terminated", "truncated")
@@ -410,7 +410,8 @@ def _build_physics(config: TaskConfig, num_envs: int, *, share_renderers: bool) 
     """Compile the scene once; the other physics share its ``MjModel`` (and, for pixels, its
     camera renderers: one GL context renders every sub-environment's data in turn)."""
     first = Physics.from_map(config.map, config.motor,
-                             max_delay(config.randomize, config.motor))
+                             max_delay(config.randomize, config.motor),
+                             distractor_count(config.randomize))
     copies = [first.copy(share_model=True) for _ in range(num_envs - 1)]
     if share_renderers:
         for physics in copies:

@@ -22,11 +22,13 @@ HELD_OUT: dict[str, dict[str, Any]] = {
     "motor gain": {"max_speed": [0.8, 0.9], "yaw_rate": [0.8, 0.9]},
     "trim": {"trim": 0.05},
     "delay": {"delay": [1 / 30, 2 / 30]},
+    "distractors": {"distractors": 12},
 }
 """Randomisation ranges per perturbed axis (fields of ``randomize``), beyond the default
 preset's: darker and lower sun, brighter floor and darker objects, a higher camera pitched
 further down with a narrower view, weaker motors, a larger left/right asymmetry (std 0.05
-against 0.02), one to two control steps more delay."""
+against 0.02), one to two control steps more delay, a dozen coloured patches beside the road
+(the preset scatters none)."""
 DEPLOYMENT = "deployment"
 
 

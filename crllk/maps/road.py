@@ -136,6 +136,16 @@ class DuckietownMap:
             return column, row
         return None
 
+    def offroad_cells(self, border: int = 1) -> list[tuple[float, float]]:
+        """South-west corners (x, y) (m) of the tile-sized cells off the road: the map's tiles
+        that are not drivable and a ring ``border`` cells wide around the map."""
+        s = self.tile_size
+        return [(column * s, (self.rows - 1 - row) * s)
+                for row in range(-border, self.rows + border)
+                for column in range(-border, self.columns + border)
+                if not (0 <= row < self.rows and 0 <= column < self.columns
+                        and self._drivable[row][column])]
+
     def is_road(self, x: float, y: float) -> bool:
         """Whether a world point lies on a drivable tile."""
         column = math.floor(x / self.tile_size)

@@ -14,6 +14,8 @@ CAMERA = ROBOT_PREFIX + "camera"
 CHASE_CAMERA = ROBOT_PREFIX + "chase"
 OVERHEAD_CAMERA = "overhead"
 OBSTACLE_PREFIX = "obstacle/"
+DISTRACTOR_PREFIX = "distractor/"
+"""Names of the flat distractor patches a randomised scene scatters beside the road."""
 
 WHEEL_RADIUS = 0.0318
 """Kinematic wheel radius (m)."""

@@ -22,8 +22,10 @@ from crllk.sim.scene import compile_scene
 from crllk.sim.variation import (
     SceneVariation,
     VariationTargets,
+    appearance,
     apply_appearance,
     apply_dynamics,
+    place_distractors,
 )
 
 _OPEN_RENDERERS: weakref.WeakSet[mujoco.Renderer] = weakref.WeakSet()
@@ -107,10 +109,10 @@ class Physics(dm_mujoco.Physics):
 
     @classmethod
     def from_map(cls, dmap: DuckietownMap, motor: MotorConfig | None = None,
-                 max_delay: float = 0.0) -> Physics:
+                 max_delay: float = 0.0, distractors: int = 0) -> Physics:
         """Build and compile the scene of ``dmap`` with the Duckiebot (command delays up to
-        ``max_delay`` s possible by :meth:`set_variation`)."""
-        physics = cls.from_model(MjModel(compile_scene(dmap, motor, max_delay)))
+        ``max_delay`` s and ``distractors`` patches possible by :meth:`set_variation`)."""
+        physics = cls.from_model(MjModel(compile_scene(dmap, motor, max_delay, distractors)))
         physics.motor = physics.nominal_motor = motor or MotorConfig()
         return physics
 
@@ -292,6 +294,9 @@ class Physics(dm_mujoco.Physics):
         if self.variation is not None or self._model_variation["appearance"] is not None:
             self._use_variation("appearance", apply_appearance)
             mujoco.mj_camlight(self._mj_model, self._mj_data)  # the variation's camera and sun
+            targets = self._model_variation["targets"]
+            if targets.distractor_geoms.size:
+                place_distractors(self._mj_data, targets, appearance(targets, self.variation))
         size = (height * supersample, width * supersample)
         renderer = self._renderers.get(size)
         if renderer is None:

@@ -20,7 +20,13 @@ from crllk.paths import DUCKIEBOT_XML
 from crllk.sim import constants as C
 from crllk.sim.motor import MotorConfig
 from crllk.sim.texture import texture_png
-from crllk.sim.variation import FLOOR_MATERIAL, SUN, SURROUNDINGS
+from crllk.sim.variation import (
+    DISTRACTOR_HALF_THICKNESS,
+    FLOOR_MATERIAL,
+    HIDDEN_DEPTH,
+    SUN,
+    SURROUNDINGS,
+)
 
 _SCENE_MARGIN = 1.0
 """Ground visible beyond the map's edge (m)."""
@@ -31,9 +37,10 @@ _OBSTACLE_CONTYPE, _OBSTACLE_CONAFFINITY = 0, 2
 
 
 def build_spec(dmap: DuckietownMap, motor: MotorConfig | None = None,
-               max_delay: float = 0.0) -> mujoco.MjSpec:
+               max_delay: float = 0.0, distractors: int = 0) -> mujoco.MjSpec:
     """The whole scene (map and robot) as an ``MjSpec`` ready to compile; the actuators keep
-    enough history for command delays up to ``max_delay`` (s) or the motor's own."""
+    enough history for command delays up to ``max_delay`` (s) or the motor's own, and the
+    scene holds ``distractors`` hidden patches that scene variations place and colour."""
     spec = mujoco.MjSpec()
     spec.modelname = f"duckietown_{dmap.name}"
     spec.option.timestep = C.PHYSICS_TIMESTEP
@@ -46,6 +53,8 @@ def build_spec(dmap: DuckietownMap, motor: MotorConfig | None = None,
     _add_overhead_camera(spec, dmap)
     for index, obj in enumerate(dmap.objects):
         _add_obstacle(spec, obj, index)
+    for index in range(distractors):
+        _add_distractor(spec, index)
     robot = mujoco.MjSpec.from_file(str(DUCKIEBOT_XML))
     _configure_motors(robot, motor or MotorConfig(), max_delay)
     spec.attach(robot, prefix=C.ROBOT_PREFIX, frame=spec.worldbody.add_frame())
@@ -53,9 +62,9 @@ def build_spec(dmap: DuckietownMap, motor: MotorConfig | None = None,
 
 
 def compile_scene(dmap: DuckietownMap, motor: MotorConfig | None = None,
-                  max_delay: float = 0.0) -> mujoco.MjModel:
+                  max_delay: float = 0.0, distractors: int = 0) -> mujoco.MjModel:
     """Compile the scene of ``dmap`` into an ``MjModel`` (see :func:`build_spec`)."""
-    return build_spec(dmap, motor, max_delay).compile()
+    return build_spec(dmap, motor, max_delay, distractors).compile()
 
 
 def export_scene(dmap: DuckietownMap, directory: str | Path) -> Path:
@@ -193,6 +202,14 @@ def _add_obstacle(spec: mujoco.MjSpec, obj: MapObject, index: int) -> None:
         scaled_size = _scale_size(geom_type, np.array(size), dims)
         body.add_geom(type=geom_type, size=scaled_size, pos=(np.array(pos) * dims).tolist(),
                       rgba=rgba, contype=0, conaffinity=0, group=1)
+
+
+def _add_distractor(spec: mujoco.MjSpec, index: int) -> None:
+    """A flat box that touches nothing, hidden below the floor until a variation moves it."""
+    spec.worldbody.add_geom(name=f"{C.DISTRACTOR_PREFIX}{index}", type=_BOX,
+                            size=[0.05, 0.05, DISTRACTOR_HALF_THICKNESS],
+                            pos=[0.0, 0.0, HIDDEN_DEPTH], rgba=[0, 0, 0, 0], contype=0,
+                            conaffinity=0, group=1)
 
 
 def _scale_size(geom_type, size: np.ndarray, dims: np.ndarray) -> list[float]:

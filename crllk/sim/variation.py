@@ -27,6 +27,10 @@ FLOOR_MATERIAL = "map"
 """Material of the textured floor (tiles and markings)."""
 SURROUNDINGS = "surroundings"
 """The ground plane beyond the map's edge: the horizon's colour."""
+DISTRACTOR_HALF_THICKNESS = 0.0005
+"""Half the thickness (m) of a distractor patch lying on the floor."""
+HIDDEN_DEPTH = -1.0
+"""Height (m) of a distractor patch no variation shows: below the floor, out of sight."""
 FLOOR_LIGHTING = 1.0
 """Approximate light falling on the floor in the nominal scene (headlight ambient plus the
 diffuse terms): a floor brighter than its texture is emission ``(brightness - 1) *`` this."""
@@ -70,6 +74,9 @@ class SceneVariation:
     """The motor model of the episode."""
     trim: float = 0.0
     """Left/right asymmetry: the right duty is scaled by (1 + trim), the left by (1 - trim)."""
+    distractors: tuple[tuple[float, float, float, float, float, float, float, float], ...] = ()
+    """Flat patches on the floor, each (x, y, yaw, half length, half width, r, g, b) (m, rad,
+    colour in [0, 1]); the scene's other patches stay hidden."""
 
     def as_dict(self) -> dict[str, Any]:
         """Plain Python values (tuples as lists, the motor as a mapping)."""
@@ -91,6 +98,7 @@ class SceneVariation:
         for name in ("light_direction", "floor_color", "horizon_color", "camera_offset"):
             values[name] = tuple(values[name])
         values["object_colors"] = tuple(tuple(c) for c in values["object_colors"])
+        values["distractors"] = tuple(tuple(d) for d in values.get("distractors", ()))
         return cls(**values)
 
 
@@ -109,6 +117,11 @@ class VariationTargets:
                           for name in (C.FORWARD_ACTUATOR, C.TURN_ACTUATOR)]
         self.object_geoms = _object_geoms(model)
         """Visual geom ids of each map object, in the map's order."""
+        self.distractor_geoms = np.array(
+            [g for g in range(model.ngeom)
+             if (mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_GEOM, g) or "").startswith(
+                 C.DISTRACTOR_PREFIX)], dtype=int)
+        """Geom ids of the scene's distractor patches (none unless compiled with them)."""
         self.sun_diffuse = model.light_diffuse[self.sun].copy()
         self.light_dir = model.light_dir[self.sun].copy()
         self.head_ambient = model.vis.headlight.ambient.copy()
@@ -120,6 +133,10 @@ class VariationTargets:
         self.cam_pos = model.cam_pos[self.camera].copy()
         self.cam_quat = model.cam_quat[self.camera].copy()
         self.cam_fovy = float(model.cam_fovy[self.camera])
+        self.distractor_pos = model.geom_pos[self.distractor_geoms].copy()
+        self.distractor_quat = model.geom_quat[self.distractor_geoms].copy()
+        self.distractor_size = model.geom_size[self.distractor_geoms].copy()
+        self.distractor_rgba = model.geom_rgba[self.distractor_geoms].copy()
         self.dynprm = model.actuator_dynprm[self.actuators, 0].copy()
         self.delay = model.actuator_delay[self.actuators].copy()
 
@@ -170,6 +187,13 @@ class Appearance:
     cam_pos: np.ndarray
     cam_quat: np.ndarray
     cam_fovy: float
+    distractor_pos: np.ndarray
+    """Position, orientation, size and colour of each of the scene's distractor patches."""
+    distractor_quat: np.ndarray
+    distractor_size: np.ndarray
+    distractor_rgba: np.ndarray
+    distractor_xmat: np.ndarray
+    """Their orientation matrices (row-major, one row of 9 per patch)."""
 
 
 def apply_appearance(model: mujoco.MjModel, targets: VariationTargets,
@@ -192,6 +216,12 @@ def write_appearance(model: mujoco.MjModel, targets: VariationTargets,
     model.cam_pos[targets.camera] = values.cam_pos
     model.cam_quat[targets.camera] = values.cam_quat
     model.cam_fovy[targets.camera] = values.cam_fovy
+    if targets.distractor_geoms.size:
+        ids = targets.distractor_geoms
+        model.geom_pos[ids] = values.distractor_pos
+        model.geom_quat[ids] = values.distractor_quat
+        model.geom_size[ids] = values.distractor_size
+        model.geom_rgba[ids] = values.distractor_rgba
 
 
 @functools.lru_cache(maxsize=256)
@@ -203,7 +233,7 @@ def appearance(targets: VariationTargets, variation: SceneVariation | None) -> A
             t.light_dir, t.sun_diffuse, t.head_ambient, t.head_diffuse, t.floor_rgba[:3],
             t.floor_emission, *_geom_colours(t, t.surroundings_rgba[:3],
                                              [rgba[:, :3] for rgba in t.object_rgba]),
-            t.cam_pos, t.cam_quat, t.cam_fovy)
+            t.cam_pos, t.cam_quat, t.cam_fovy, *_distractors(t, ()))
     v = variation
     direction = np.asarray(v.light_direction, dtype=float)
     floor = np.asarray(v.floor_color)
@@ -217,7 +247,37 @@ def appearance(targets: VariationTargets, variation: SceneVariation | None) -> A
         t.head_ambient * v.ambient, t.head_diffuse * v.headlight,
         (t.floor_rgba[:3] * floor / scale).astype(np.float32),
         t.floor_emission + (scale - 1.0) * FLOOR_LIGHTING,
-        *_geom_colours(t, horizon, objects), position, quat, v.camera_fovy)
+        *_geom_colours(t, horizon, objects), position, quat, v.camera_fovy,
+        *_distractors(t, v.distractors))
+
+
+def _distractors(targets: VariationTargets, patches: tuple[tuple[float, ...], ...]
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Position, quaternion, size, RGBA and orientation-matrix rows of the scene's distractor
+    geoms: the first
+    ``len(patches)`` lying on the floor as drawn, the others hidden as compiled."""
+    t = targets
+    pos, quat = t.distractor_pos.copy(), t.distractor_quat.copy()
+    size, rgba = t.distractor_size.copy(), t.distractor_rgba.copy()
+    for k, (x, y, yaw, half_length, half_width, r, g, b) in enumerate(
+            patches[:len(t.distractor_geoms)]):
+        pos[k] = (x, y, DISTRACTOR_HALF_THICKNESS)
+        quat[k] = (math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2))
+        size[k] = (half_length, half_width, DISTRACTOR_HALF_THICKNESS)
+        rgba[k] = (r, g, b, 1.0)
+    xmat = np.empty((len(quat), 9))
+    for k, q in enumerate(quat):
+        mujoco.mju_quat2Mat(xmat[k], q)
+    return pos, quat, size, rgba.astype(np.float32), xmat
+
+
+def place_distractors(data: mujoco.MjData, targets: VariationTargets,
+                      values: Appearance) -> None:
+    """Write the distractor patches' world poses into ``data``: fixed geoms of the world body
+    whose pose the model holds, which ``mj_kinematics`` would copy from a model that copies
+    sharing it may have rewritten since."""
+    data.geom_xpos[targets.distractor_geoms] = values.distractor_pos
+    data.geom_xmat[targets.distractor_geoms] = values.distractor_xmat
 
 
 def _geom_colours(targets: VariationTargets, surroundings: np.ndarray,

@@ -35,7 +35,7 @@ from crllk.tasks.actions import ACTIONS, action_duty
 from crllk.tasks.config import TaskConfig, load_task_config
 from crllk.tasks.constraints import Constraint
 from crllk.tasks.frames import robot_camera_image
-from crllk.tasks.randomization import draw_variation, max_delay
+from crllk.tasks.randomization import distractor_count, draw_variation, max_delay
 
 OBSERVATIONS = ("pixels", "state")
 
@@ -140,6 +140,8 @@ class LaneKeeping(base.Task):
         self.obstacles = obstacle_index(self.map)
         """The map's obstacles in the lane frame (state features and encounter spawns)."""
         self._colliding = tuple(obj for obj in self.map.objects if obj.collidable)
+        self._offroad_cells = self.map.offroad_cells()
+        """Cells where randomised episodes scatter their distractor patches."""
         """The map's objects the robot collides with."""
         self._lane_lines = (-LANE_OFFSET, white_lateral(self.map.tile_size))
         """Lateral offsets (m) of the yellow centre line and the white edge line."""
@@ -171,7 +173,8 @@ class LaneKeeping(base.Task):
         x, y, yaw = self._spawn_pose(encounter)
         if self.config.randomize is not None:
             self.variation = draw_variation(self.config.randomize, self.config.motor,
-                                            len(self.map.objects), self.random)
+                                            len(self.map.objects), self.random,
+                                            self._offroad_cells, self.map.tile_size)
             physics.set_variation(self.variation)
         physics.set_pose(x, y, yaw)
         physics.forward()
@@ -472,7 +475,8 @@ def load(task: str | Path, *, observation: str = "pixels", action: str = "discre
     """
     config = load_task_config(task, overrides)
     physics = Physics.from_map(config.map, config.motor,
-                               max_delay(config.randomize, config.motor))
+                               max_delay(config.randomize, config.motor),
+                               distractor_count(config.randomize))
     lane_task = LaneKeeping(config, observation=observation, action=action, random=seed)
     steps = config.step_limit()  # a time in seconds for dm-control, a hair under the limit
     return control.Environment(

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -72,6 +72,10 @@ class RandomizeConfig:
     trim: float = 0.0
     """Standard deviation of the left/right motor asymmetry: the right duty is scaled by
     (1 + trim), the left by (1 - trim)."""
+    distractors: int = 0
+    """Flat patches of random colour, size and orientation scattered on the cells beside the
+    road (off-road tiles and a ring of cells around the map) each episode, gym-duckietown's
+    distractors; 0: none. Not in ``default``: each costs render time."""
 
 
 PRESETS: dict[str, RandomizeConfig] = {
@@ -89,6 +93,10 @@ randomisation; the delay varies by one 30 Hz control step."""
 
 _SCALARS = ("camera_position_noise", "trim")
 """Fields that are one non-negative number, not a range."""
+_COUNTS = ("distractors",)
+"""Fields that are a whole number >= 0."""
+DISTRACTOR_HALF_SIDES = (0.015, 0.06)
+"""Range of each half side (m) of a distractor patch."""
 _LOWEST = {"jpeg_quality": 1.0, "sensor_noise": 0.0, "light_tilt": 0.0}
 """Least lower bound of a range; multipliers must be positive, the delay is unbounded."""
 _HIGHEST = {"jpeg_quality": 100.0, "light_tilt": math.pi / 2}
@@ -115,8 +123,12 @@ def parse_randomize(value: Any, source: str | Path) -> RandomizeConfig | None:
         if key not in names:
             raise ConfigError(source, where, f"unknown setting (known: preset, "
                               f"{', '.join(names)})")
-        changes[key] = _scalar(item, source, where) if key in _SCALARS else \
-            _range(key, item, source, where)
+        if key in _COUNTS:
+            changes[key] = _count(item, source, where)
+        elif key in _SCALARS:
+            changes[key] = _scalar(item, source, where)
+        else:
+            changes[key] = _range(key, item, source, where)
     config = dataclasses.replace(config, **changes)
     return None if config == RandomizeConfig() else config
 
@@ -132,6 +144,14 @@ def _number(value: Any, source: str | Path, where: str) -> float:
     if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
         raise ConfigError(source, where, f"expected a finite number, got {value!r}")
     return float(value)
+
+
+def _count(value: Any, source: str | Path, where: str) -> int:
+    if value is None:
+        return 0
+    if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+        raise ConfigError(source, where, f"expected a whole number >= 0, got {value!r}")
+    return value
 
 
 def _scalar(value: Any, source: str | Path, where: str) -> float:
@@ -165,10 +185,18 @@ def max_delay(config: RandomizeConfig | None, motor: MotorConfig) -> float:
     return max(motor.delay + config.delay[1], 0.0)
 
 
+def distractor_count(config: RandomizeConfig | None) -> int:
+    """The distractor patches the scene must hold for ``config``."""
+    return 0 if config is None else config.distractors
+
+
 def draw_variation(config: RandomizeConfig, motor: MotorConfig, objects: int,
-                   random: np.random.RandomState) -> SceneVariation:
+                   random: np.random.RandomState,
+                   offroad_cells: Sequence[tuple[float, float]] = (),
+                   cell_size: float = 0.0) -> SceneVariation:
     """One episode's variation, drawn from ``random`` in a fixed order, only for the fields
-    ``config`` sets (``objects``: the map's object count)."""
+    ``config`` sets (``objects``: the map's object count; distractors lie in the square cells
+    of side ``cell_size`` (m) whose south-west corners are ``offroad_cells``)."""
 
     def factor(bounds: Range | None) -> float:
         return 1.0 if bounds is None else float(random.uniform(*bounds))
@@ -207,6 +235,8 @@ def draw_variation(config: RandomizeConfig, motor: MotorConfig, objects: int,
     delay = motor.delay if config.delay is None else \
         max(motor.delay + float(random.uniform(*config.delay)), 0.0)
     trim = float(random.normal(0.0, config.trim)) if config.trim > 0 else 0.0
+    distractors = tuple(_draw_distractor(random, offroad_cells, cell_size)
+                        for _ in range(config.distractors if offroad_cells else 0))
     return SceneVariation(
         light_direction=light, light_intensity=light_intensity, ambient=ambient,
         headlight=headlight, floor_color=floor, horizon_color=horizon,
@@ -217,7 +247,20 @@ def draw_variation(config: RandomizeConfig, motor: MotorConfig, objects: int,
                           yaw_rate_per_duty=motor.yaw_rate_per_duty * yaw / distance,
                           linear_time_constant=motor.linear_time_constant * lag,
                           yaw_time_constant=motor.yaw_time_constant * lag, delay=delay),
-        trim=trim)
+        trim=trim, distractors=distractors)
 
 
-__all__ = ["PRESETS", "RandomizeConfig", "draw_variation", "max_delay", "parse_randomize"]
+def _draw_distractor(random: np.random.RandomState, cells: Sequence[tuple[float, float]],
+                     cell_size: float) -> tuple[float, float, float, float, float, float, float,
+                                                float]:
+    """One patch: (x, y, yaw, half length, half width, r, g, b) in a random cell."""
+    x0, y0 = cells[random.randint(len(cells))]
+    x, y = x0 + random.uniform(0.0, cell_size), y0 + random.uniform(0.0, cell_size)
+    yaw = random.uniform(-math.pi, math.pi)
+    half_length, half_width = random.uniform(*DISTRACTOR_HALF_SIDES, size=2).tolist()
+    r, g, b = random.uniform(0.0, 1.0, size=3).tolist()
+    return (float(x), float(y), float(yaw), half_length, half_width, r, g, b)
+
+
+__all__ = ["PRESETS", "RandomizeConfig", "distractor_count", "draw_variation", "max_delay",
+           "parse_randomize"]
