@@ -28,11 +28,17 @@ RECORDED = 1008
 """Observations per parity check: 16 simulations x 63 steps."""
 
 
-@pytest.fixture(scope="module", params=["pixels-discrete", "pixels-continuous", "state-discrete"])
+HISTORY = ["obs.history=2", "obs.history_stride=3"]
+"""A policy that reads its last two images, three steps apart."""
+
+
+@pytest.fixture(scope="module", params=["pixels-discrete", "pixels-continuous", "state-discrete",
+                                        "pixels-discrete-history"])
 def exported(request, tmp_path_factory):
-    obs, action = request.param.split("-")
+    obs, action, *history = request.param.split("-")
     run = run_in_process(tmp_path_factory.mktemp(request.param) / "run", 1,
-                         [f"obs={obs}", f"action={action}", "eval.every=0"])
+                         [f"obs={obs}", f"action={action}", "eval.every=0",
+                          *(HISTORY if history else [])])
     assert exit_status(lambda: export.main([f"run={run}"])) == 0
     return run, obs, action
 
@@ -75,6 +81,27 @@ def test_onnx_actions_equal_pytorch_on_recorded_observations(exported):
     assert onnx_duty.shape == (len(observations), 2)
 
 
+@pytest.mark.parametrize("exported", ["pixels-discrete-history"], indirect=True)
+def test_the_pilot_remembers_images_as_the_training_env_stacks_them(exported):
+    """Fed the newest image of each observation of an episode, the pilot stacks exactly what
+    the env showed the policy, and starts again after :meth:`Pilot.reset`."""
+    run, _, _ = exported
+    config = load_run_config(run)
+    assert config.obs.history == 2
+    pilot = Pilot.from_onnx(run / "policy.onnx")
+    env = build_env(config, num_envs=1, seed=3)
+    try:
+        for _ in range(2):
+            pilot.reset()
+            td = env.reset()
+            for _ in range(12):
+                stacked = td["pixels"][0].numpy()
+                np.testing.assert_array_equal(pilot.remember(stacked[..., :3]), stacked)
+                td = step_mdp(env.rand_step(td))
+    finally:
+        env.close()
+
+
 def test_a_640x480_frame_becomes_the_training_image():
     """An array of a whole multiple of 30x40 is box-averaged as training does; a JPEG of a
     rendered 640x480 frame lands within JPEG noise of the simulator's own 30x40 image; colours
@@ -109,7 +136,9 @@ def test_the_pilot_takes_jpeg_bytes_and_arrays(exported):
         jpeg = io.BytesIO()
         Image.fromarray(frame).save(jpeg, format="JPEG")
         command = pilot.step(jpeg.getvalue())
-        expected = pilot.duty(policy_image(jpeg.getvalue()))
+        # the first frame of a drive fills the whole memory of a policy with a history
+        expected = pilot.duty(np.tile(policy_image(jpeg.getvalue()),
+                                      (1, 1, pilot.observation_shape[2] // 3)))
         assert (command.vel_left, command.vel_right) == pytest.approx(expected.tolist())
     assert -1 <= command.vel_left <= 1 and -1 <= command.vel_right <= 1
 

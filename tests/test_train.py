@@ -166,6 +166,7 @@ def test_existing_run_is_not_overwritten(tmp_path):
     ("ppo.momentum=0.9", "override: ppo.momentum: no such setting"),
     ("seed", "override: seed: cannot parse this override"),
     ("ppo.gamma=1.5", "ppo.gamma: must lie in [0, 1]"),
+    ("obs.history=0", "obs.history: must be > 0"),
 ])
 def test_bad_override_fails_clearly(tmp_path, override, expected):
     """One line, exit status 2, nothing written; for a group, the choices that exist."""

@@ -1,9 +1,11 @@
 """A run's deterministic policy as an ONNX file (:class:`~.policy.DeployedPolicy`).
 
-The graph has one input, ``observation`` (uint8 ``[30, 40, 3]`` RGB for pixel runs, float32
-``[F]`` state features for state runs), and one output, ``duty`` (float32 ``[2]``: left and
-right wheel duty cycles in [-1, 1]). What the pilot needs to feed it is in the model's metadata:
-``crllk.observation``, ``crllk.action``, ``crllk.observation_shape``, and where it comes from
+The graph has one input, ``observation`` (uint8 ``[30, 40, 3]`` RGB for pixel runs, ``[30,
+40, 3 * history]`` with a frame history, float32 ``[F]`` state features for state runs), and one
+output, ``duty`` (float32 ``[2]``: left and right wheel duty cycles in [-1, 1]). What the pilot
+needs to feed it is in the model's metadata: ``crllk.observation``, ``crllk.action``,
+``crllk.observation_shape``, ``crllk.history`` (images and steps between them), and where it
+comes from
 (``crllk.task``, ``crllk.run``, ``crllk.iteration``, ``crllk.frames``).
 """
 
@@ -41,7 +43,9 @@ def deployed_policy(run_dir: str | Path) -> tuple[DeployedPolicy, dict[str, Any]
         env.close()
     policy = DeployedPolicy(actor, config.action.name).eval()
     metadata = {"observation": config.obs.name, "action": config.action.name,
-                "observation_shape": json.dumps(list(shape)), "task": config.task_name,
+                "observation_shape": json.dumps(list(shape)),
+                "history": json.dumps([config.obs.history, config.obs.history_stride]),
+                "task": config.task_name,
                 "run": str(Path(run_dir).resolve()), "iteration": str(info["iteration"]),
                 "frames": str(info["frames"])}
     return policy, metadata

@@ -3,7 +3,8 @@
 The scripted lane follower drives a task; at every step the simulator renders the robot camera
 twice: the policy's own 30×40 observation, and a 640×480 frame as the Duckiebot camera takes
 it, JPEG-encoded as the camera publishes it. The pilot steps on the JPEG; the policy reads the
-observation. Their wheel commands agree when the policy chose the same action.
+observation (each with its own memory of images, for a policy with a frame history). Their
+wheel commands agree when the policy chose the same action.
 """
 
 from __future__ import annotations
@@ -37,13 +38,17 @@ def pilot_parity(pilot: Pilot, task: str, frames: int = 900, seed: int = 0,
     """Compares the pilot on JPEG camera frames with the policy on the simulator's images."""
     env = load(task, observation="pixels", action="duty", seed=seed)
     follower = LaneFollower(env.task.map, env.task.config.motor)
+    simulated = Pilot(pilot.session, pilot.metadata, pilot.source)  # its own image memory
     step = env.reset()
     same, differences = 0, []
     for _ in range(frames):
+        if step.first():
+            pilot.reset(), simulated.reset()
         observation = step.observation["pixels"]
         prepared = robot_camera_image(env.physics.render_camera, pilot.observation_shape[:2],
                                       quality)
-        same += int(np.array_equal(pilot.duty(prepared), pilot.duty(observation)))
+        same += int(np.array_equal(pilot.duty(pilot.remember(prepared)),
+                                   simulated.duty(simulated.remember(observation))))
         differences.append(np.abs(prepared.astype(np.int16) - observation).mean())
         step = env.reset() if step.last() else env.step(follower.duty(env.physics))
     env.physics.free_renderers()

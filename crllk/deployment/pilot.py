@@ -6,6 +6,11 @@ publishes them or an RGB array of any size, prepares it exactly as in training
 :class:`WheelCommand` whose ``vel_left`` and ``vel_right`` in [-1, 1] are the wheel duty cycles
 the policy chose, the values of the robot's ``WheelsCmdStamped`` message. A state policy's
 pilot takes the state features instead.
+
+A policy trained with a frame history (``obs.history``) reads its last images together; the
+pilot keeps them (:class:`~crllk.tasks.frames.FrameHistory`), one per ``step``, so it must be
+stepped at the control rate it was trained at (30 Hz, the camera's rate), and :meth:`Pilot.reset`
+starts a new drive.
 """
 
 from __future__ import annotations
@@ -19,7 +24,7 @@ import onnxruntime
 
 from crllk.deployment.export import INPUT, METADATA_PREFIX
 from crllk.errors import ConfigError
-from crllk.tasks.frames import policy_image
+from crllk.tasks.frames import FrameHistory, policy_image
 
 SOURCE = "pilot"
 
@@ -43,10 +48,19 @@ class Pilot:
             self.observation = metadata["observation"]
             self.action = metadata["action"]
             self.observation_shape = tuple(json.loads(metadata["observation_shape"]))
-        except (KeyError, ValueError):
+            count, stride = json.loads(metadata.get("history", "[1, 1]"))
+        except (KeyError, ValueError, TypeError):
             raise ConfigError(source, "metadata", "not a crllk policy (export it with "
                               "python -m crllk.export)") from None
         self.metadata = metadata
+        self.history = (FrameHistory(1, (*self.observation_shape[:2], 3), count, stride)
+                        if self.observation == "pixels" else None)
+        """The images the policy remembers (pixel policies)."""
+        self._fresh = True
+
+    def reset(self) -> None:
+        """Forget the images seen: the next frame starts a drive (fills the whole history)."""
+        self._fresh = True
 
     @classmethod
     def from_onnx(cls, path: str | Path, threads: int = 1) -> Pilot:
@@ -86,7 +100,20 @@ class Pilot:
         """The policy's wheel duties (left, right) for an observation it reads as it is."""
         return self.session.run(None, {INPUT: observation})[0]
 
+    def remember(self, observation: np.ndarray) -> np.ndarray:
+        """The policy's input after one more observation (:meth:`observation_of`): pixel
+        policies stack it with the images they remember."""
+        if self.history is None:
+            return observation
+        if self._fresh:
+            self.history.restart([0], observation[None])
+            self._fresh = False
+        else:
+            self.history.push(observation[None])
+        return self.history.stacked()[0]
+
     def step(self, frame: bytes | np.ndarray) -> WheelCommand:
-        """The wheel command for one frame."""
-        left, right = np.clip(self.duty(self.observation_of(frame)), -1.0, 1.0).tolist()
+        """The wheel command for the next frame of a drive."""
+        observation = self.remember(self.observation_of(frame))
+        left, right = np.clip(self.duty(observation), -1.0, 1.0).tolist()
         return WheelCommand(vel_left=left, vel_right=right)

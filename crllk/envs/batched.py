@@ -51,6 +51,7 @@ from crllk.sim.camera_effects import apply_effects
 from crllk.sim.physics import Physics
 from crllk.tasks.config import TaskConfig, load_task_config
 from crllk.tasks.follower import FollowerGains
+from crllk.tasks.frames import FrameHistory
 from crllk.tasks.lane_keeping import (
     ACTIONS,
     OBSERVATIONS,
@@ -64,6 +65,8 @@ from crllk.tasks.teacher import Teacher
 
 DONE_KEYS = ("done", "terminated", "truncated")
 TERMINATIONS = (None, "off_road", "collision", "unstable")
+SNAPSHOT_ARRAYS = ("observations", "states", "history_images")
+"""The per-simulation arrays of a snapshot (the last one only with a frame history)."""
 """The ``"termination"`` entry's codes: why the task ended the episode on this step."""
 
 
@@ -81,13 +84,16 @@ class BatchedLaneKeepingEnv(EnvBase):
                  action: str = "discrete", seed: int | None = None,
                  privileged_state: bool = False, teacher: bool = False,
                  teacher_margin: float = FollowerGains.avoid_margin,
-                 commands: bool = False, device: torch.device | str = "cpu"):
+                 commands: bool = False, history: int = 1, history_stride: int = 1,
+                 device: torch.device | str = "cpu"):
         if num_envs < 1:
             raise ValueError(f"num_envs must be at least 1, got {num_envs}")
         if observation not in OBSERVATIONS:
             raise ValueError(f"observation must be one of {OBSERVATIONS}, got {observation!r}")
         if action not in ACTIONS:
             raise ValueError(f"action must be one of {ACTIONS}, got {action!r}")
+        if history > 1 and observation != "pixels":
+            raise ValueError(f"a frame history needs pixel observations, got {observation!r}")
         super().__init__(device=device, batch_size=torch.Size([num_envs]))
         self.config = config
         self.num_envs = num_envs
@@ -103,6 +109,10 @@ class BatchedLaneKeepingEnv(EnvBase):
         self.seeds: list[int] = []
         """The spawn seed of each sub-environment (see :func:`sub_env_seeds`)."""
         self._observations = np.zeros(self._observation_shape(), self._observation_dtype())
+        self.history = (FrameHistory(num_envs, self._observations.shape[1:], history,
+                                     history_stride) if history > 1 else None)
+        """With ``history`` > 1, ``"pixels"`` stacks that many recent camera images,
+        ``history_stride`` control steps apart, newest first (:class:`FrameHistory`)."""
         self.privileged_state = privileged_state and observation == "pixels"
         """Whether pixel observations come with the ``"state"`` features too (for critics)."""
         self._states = np.zeros((num_envs, len(state_feature_names(config))), np.float32)
@@ -141,6 +151,8 @@ class BatchedLaneKeepingEnv(EnvBase):
     def _make_specs(self) -> None:
         n = self.batch_size
         shape = self._observation_shape()
+        if self.history is not None:
+            shape = (*shape[:-1], self.history.channels)
         if self.observation_type == "pixels":
             obs: TensorSpec = Bounded(0, 255, shape=shape, dtype=torch.uint8, device=self.device)
         else:
@@ -204,6 +216,8 @@ class BatchedLaneKeepingEnv(EnvBase):
         for i in indices:
             self._reset_one(i)
         self._apply_camera_effects(indices)
+        if self.history is not None:
+            self.history.restart(indices, self._observations[list(indices)])
         false = torch.zeros((self.num_envs, 1), dtype=torch.bool)
         out = {**self._observation_entries(), **{key: false.clone() for key in DONE_KEYS},
                "termination": torch.zeros((self.num_envs, 1), dtype=torch.int64)}
@@ -241,7 +255,9 @@ class BatchedLaneKeepingEnv(EnvBase):
             self._observations[chosen] = apply_effects(self._observations[chosen], effects)
 
     def _observation_entries(self) -> dict[str, torch.Tensor]:
-        entries = {self.observation_type: torch.from_numpy(self._observations.copy())}
+        observation = (self._observations.copy() if self.history is None
+                       else self.history.stacked())
+        entries = {self.observation_type: torch.from_numpy(observation)}
         if self.privileged_state:
             entries["state"] = torch.from_numpy(self._states.copy())
         if self.reports_encounters:
@@ -267,6 +283,8 @@ class BatchedLaneKeepingEnv(EnvBase):
             task.after_step(physics)
             self._observe(i, physics, task)
         self._apply_camera_effects(range(self.num_envs))
+        if self.history is not None:
+            self.history.push(self._observations)
         self.step_counts += 1
         return self._tensordict(self._step_outputs([task.outcome for task in self.tasks]))
 
@@ -300,7 +318,9 @@ class BatchedLaneKeepingEnv(EnvBase):
         full MuJoCo state (delay history included), task hook state and spawn generator, the
         step counts, seeds and last observations. Plain Python values and tensors only, so
         ``torch.save`` / ``torch.load`` (``weights_only``) round-trip it."""
-        return {**self._identity(),
+        history = ({} if self.history is None
+                   else {"history_images": torch.from_numpy(self.history.images.copy())})
+        return {**self._identity(), **history,
                 "seeds": list(self.seeds),
                 "step_counts": self.step_counts.tolist(),
                 "observations": torch.from_numpy(self._observations.copy()),
@@ -330,13 +350,18 @@ class BatchedLaneKeepingEnv(EnvBase):
         self.step_counts[:] = state["step_counts"]
         self._observations[:] = state["observations"].numpy()
         self._states[:] = state["states"].numpy()
+        if self.history is not None:
+            self.history.images[:] = state["history_images"].numpy()
 
     def _identity(self) -> dict[str, Any]:
         """The constructor arguments a snapshot must agree on."""
-        return {"task": self.config.name, "num_envs": self.num_envs,
-                "observation": self.observation_type, "action": self.action_type,
-                "privileged_state": self.privileged_state, "teacher": bool(self.teachers),
-                "commands": self.reports_commands}
+        identity = {"task": self.config.name, "num_envs": self.num_envs,
+                    "observation": self.observation_type, "action": self.action_type,
+                    "privileged_state": self.privileged_state, "teacher": bool(self.teachers),
+                    "commands": self.reports_commands}
+        if self.history is not None:  # only then, so older snapshots still load
+            identity["history"] = [self.history.count, self.history.stride]
+        return identity
 
     # ----- teardown ---------------------------------------------------------------------
     def close(self, *, raise_if_closed: bool = True) -> None:
@@ -373,16 +398,17 @@ def merge_sim_states(states: Sequence[dict[str, Any]]) -> dict[str, Any]:
     of the simulations (workers in order): the snapshot one env holding them all would take."""
     first = states[0]
     merged = {key: first[key] for key in ("task", "observation", "action", "privileged_state",
-                                          "teacher", "commands")}
+                                          "teacher", "commands", "history") if key in first}
     for state in states[1:]:
         for key, value in merged.items():
-            if state[key] != value:
-                raise ValueError(f"snapshots disagree on {key}: {value!r}, {state[key]!r}")
+            if state.get(key) != value:
+                raise ValueError(f"snapshots disagree on {key}: {value!r}, {state.get(key)!r}")
     merged["num_envs"] = sum(state["num_envs"] for state in states)
     for key in ("seeds", "step_counts", "sub_envs"):
         merged[key] = [item for state in states for item in state[key]]
-    for key in ("observations", "states"):
-        merged[key] = torch.cat([state[key] for state in states])
+    for key in SNAPSHOT_ARRAYS:
+        if key in first:
+            merged[key] = torch.cat([state[key] for state in states])
     return merged
 
 
@@ -399,8 +425,9 @@ def split_sim_state(state: dict[str, Any], sizes: Sequence[int]) -> list[dict[st
     parts, start = [], 0
     for size in sizes:
         part = dict(state, num_envs=size)
-        for key in ("seeds", "step_counts", "sub_envs", "observations", "states"):
-            part[key] = state[key][start:start + size]
+        for key in ("seeds", "step_counts", "sub_envs", *SNAPSHOT_ARRAYS):
+            if key in state:
+                part[key] = state[key][start:start + size]
         parts.append(part)
         start += size
     return parts
@@ -423,7 +450,8 @@ def make_env(task: str | Path, *, num_envs: int = 1, observation: str = "pixels"
              action: str = "discrete", seed: int | None = None,
              overrides: dict[str, Any] | None = None, privileged_state: bool = False,
              teacher: bool = False, teacher_margin: float = FollowerGains.avoid_margin,
-             commands: bool = False, device: torch.device | str = "cpu") -> BatchedLaneKeepingEnv:
+             commands: bool = False, history: int = 1, history_stride: int = 1,
+             device: torch.device | str = "cpu") -> BatchedLaneKeepingEnv:
     """A TorchRL environment with ``num_envs`` lane-keeping simulations in one process.
 
     Args:
@@ -442,13 +470,16 @@ def make_env(task: str | Path, *, num_envs: int = 1, observation: str = "pixels"
         teacher_margin: the gap (m) the teacher keeps beside obstacles it passes.
         commands: also return ``"commands"`` (float32 ``[N, 2K]``), the wheel duties of the
             last K steps, newest first (K covers the motor delay).
+        history: pixels only: ``"pixels"`` stacks this many recent camera images, newest
+            first (uint8 ``[N, H, W, 3 * history]``), a memory of what went out of view.
+        history_stride: control steps between the stacked images.
         device: where the returned tensors live (simulation runs on the CPU).
     """
     config = load_task_config(task, overrides)
     return BatchedLaneKeepingEnv(config, num_envs=num_envs, observation=observation,
                                  action=action, seed=seed, privileged_state=privileged_state,
                                  teacher=teacher, teacher_margin=teacher_margin, commands=commands,
-                                 device=device)
+                                 history=history, history_stride=history_stride, device=device)
 
 
 __all__ = ["TERMINATIONS", "BatchedLaneKeepingEnv", "MirroredTeacherFlag", "make_env",

@@ -7,12 +7,15 @@ JPEG bytes (as the Duckiebot camera publishes them, 640×480) are decoded to RGB
 frame whose aspect ratio is not the policy's 4:3 is cropped to it about its centre; then it is
 area-averaged down to 30×40 — exactly :func:`box_average` when the size is a whole multiple,
 as 640×480 is (16×16 blocks), else PIL's box filter.
+
+A policy with a memory reads several recent images at once (:class:`FrameHistory`), kept the
+same way by the training env and by the pilot.
 """
 
 from __future__ import annotations
 
 import io
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 
 import numpy as np
 from PIL import Image
@@ -84,3 +87,41 @@ def robot_camera_image(render: Callable[[int, int], np.ndarray], size: tuple[int
     buffer = io.BytesIO()
     Image.fromarray(render(*ROBOT_CAMERA)).save(buffer, format="JPEG", quality=quality)
     return policy_image(buffer.getvalue(), size)
+
+
+class FrameHistory:
+    """The recent camera images of ``num`` robots, stacked as a policy with a memory reads them.
+
+    It keeps the last ``(count - 1) * stride + 1`` images of each robot and shows ``count`` of
+    them, ``stride`` control steps apart, newest first, along the channels: ``[num, H, W,
+    3 * count]``, channels ``3k .. 3k + 2`` being the RGB image of ``k * stride`` steps ago. At
+    an episode's start (:meth:`restart`) every slot holds its first image. ``count=1`` is the
+    plain image.
+    """
+
+    def __init__(self, num: int, image_shape: tuple[int, int, int], count: int = 1,
+                 stride: int = 1):
+        if count < 1 or stride < 1:
+            raise ValueError(f"count and stride must be at least 1, got {count}, {stride}")
+        self.count, self.stride = count, stride
+        self.images = np.zeros((num, (count - 1) * stride + 1, *image_shape), np.uint8)
+        """Every kept image, ``[num, slots, H, W, 3]``, the newest in slot 0."""
+
+    @property
+    def channels(self) -> int:
+        return self.count * self.images.shape[-1]
+
+    def restart(self, indices: Sequence[int], images: np.ndarray) -> None:
+        """Robots ``indices`` start an episode: all their slots hold ``images`` (one each)."""
+        self.images[list(indices)] = np.asarray(images)[:, None]
+
+    def push(self, images: np.ndarray) -> None:
+        """Every robot's newest image (``[num, H, W, 3]``), after one control step."""
+        self.images[:, 1:] = self.images[:, :-1]
+        self.images[:, 0] = images
+
+    def stacked(self) -> np.ndarray:
+        """What the policy reads: ``[num, H, W, 3 * count]`` uint8 (a new array)."""
+        chosen = self.images[:, ::self.stride]
+        num, _, height, width, _ = chosen.shape
+        return np.moveaxis(chosen, 1, 3).reshape(num, height, width, self.channels)

@@ -47,7 +47,8 @@ def build_env(config: TrainConfig, *, num_envs: int, seed: int,
                     privileged_state=config.model.critic_input == "state",
                     teacher=training and (config.teacher.coeff > 0 or config.teacher.final > 0),
                     teacher_margin=config.teacher.margin,
-                    commands=config.model.policy_commands)
+                    commands=config.model.policy_commands, history=config.obs.history,
+                    history_stride=config.obs.history_stride)
 
 
 TrainingEnv = BatchedLaneKeepingEnv | ParallelLaneKeepingEnv | RayLaneKeepingCollector

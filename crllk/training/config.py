@@ -95,6 +95,15 @@ class ObsConfig:
     """What the policy reads (``obs=pixels|state``)."""
 
     name: str = setting(check=one_of("state", "pixels"))
+    history: int = setting(1, check=positive)
+    """Pixels only: camera images the policy reads at once, newest first (1: the current one),
+    a memory of obstacles that went out of view."""
+    history_stride: int = setting(1, check=positive)
+    """Control steps between those images (1/30 s each)."""
+
+    def problems(self) -> Iterator[tuple[str, str]]:
+        if self.history > 1 and self.name != "pixels":
+            yield "history", f"needs obs=pixels (a history of camera images), got obs={self.name}"
 
 
 @dataclass
