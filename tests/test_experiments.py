@@ -12,6 +12,7 @@ import pytest
 from conftest import TINY_EXPERIMENT
 
 from crllk.experiments import AGENTS, PAPER_TABLE1, sweep_markdown, table_markdown
+from crllk.experiments.runs import MODE_EVALUATION
 from crllk.training.runs import read_eval_json
 
 REPO = Path(__file__).resolve().parents[1]
@@ -27,8 +28,15 @@ def test_table1_lists_every_agent_beside_the_paper(tiny_experiments):
         summary = read_eval_json(run)["summary"]
         assert entry["J_clane"]["values"] == [summary["J_clane"]]
         assert entry["frames"] == [16]
+        # the deployed policy, its mode, played through the same episodes
+        mode = json.loads((run / f"{MODE_EVALUATION}.json").read_text())
+        assert mode["evaluation"]["deterministic"] is True
+        assert mode["evaluation"]["seed"] == read_eval_json(run)["evaluation"]["seed"]
+        assert entry["mode"]["J_coll"]["values"] == [mode["summary"]["J_coll"]]
     markdown = (results / "table1.md").read_text()
     assert markdown == table_markdown(document)
+    assert "| J_coll, deployed policy (mode) |" in markdown
+    assert "CRLLK-D's deployed policy (mode)" in markdown
     assert "Budget: 16 environment frames per run" in markdown
     assert "Observation: `pixels`" in markdown and "python -m crllk.experiments all" in markdown
     assert "| J_clane (paper) | 0.66 ± 0.02 | 0.99 ± 0.07 | 0.31 ± 0.00 | 1.04 ± 0.25 | |" \

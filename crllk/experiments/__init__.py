@@ -12,7 +12,8 @@ task=... seed=... resume=true``, one sweep per agent and setting, Hydra's joblib
 ``--jobs`` at a time, one per core; output in ``<runs-root>/sweeps.log``), so an interrupted
 experiment picks up where its runs stopped and finished runs are not trained again. Each run is
 then evaluated (:func:`crllk.evaluation.runs.evaluate_run`, as ``python -m crllk.evaluate``; an
-``eval.json`` of the same checkpoint and settings is reused) and the results are written to
+``eval.json`` of the same checkpoint and settings is reused; so is the policy it deploys, its
+mode, into ``eval-mode.json``, where the checkpoint is there) and the results are written to
 ``results/<obs>/``: a Markdown table with the paper's numbers beside ours and the JSON behind it,
 or the figures. Runs live in ``results/runs/<obs>/<task>/`` and are kept in the repository
 without their checkpoints (configuration, logs, ``eval.json``), so a finished run is reused by a
@@ -61,13 +62,17 @@ from crllk.training.config import validate
 # ----- tables -------------------------------------------------------------------------------
 def agent_results(outcome: Outcome, task: str, agents: Sequence[str],
                   lane_threshold: float = THRESHOLDS["lane"]) -> dict[str, dict[str, Any]]:
-    """Mean ± std across seeds per agent, with the training budget actually spent."""
+    """Mean ± std across seeds per agent, with the training budget actually spent, and under
+    ``"mode"`` those of the deployed policy when every seed's was evaluated."""
     results = {}
     for agent in agents:
-        docs = [d for s, d in outcome.documents.items()
-                if s.agent == agent and s.task == task and s.lane_threshold == lane_threshold]
+        specs = [s for s in outcome.documents
+                 if s.agent == agent and s.task == task and s.lane_threshold == lane_threshold]
+        docs = [outcome.documents[s] for s in specs]
         if docs:
             summary = aggregate(docs)
+            if all(s in outcome.modes for s in specs):
+                summary["mode"] = aggregate([outcome.modes[s] for s in specs])
             summary["train_seconds"] = [d["source"]["elapsed_s"] for d in docs]
             summary["frames"] = [d["source"]["frames"] for d in docs]
             summary["multipliers"] = [d["source"]["multipliers"] for d in docs]
@@ -91,27 +96,30 @@ def _all_of(constraints: Sequence[Any]) -> str:
 
 
 def verdicts(results: dict[str, dict[str, Any]], constrained: Sequence[str],
-             thresholds: dict[str, float]) -> list[str]:
-    """One sentence per constrained agent: satisfied, or by how much each constraint misses."""
+             thresholds: dict[str, float], mode: bool = False) -> list[str]:
+    """One sentence per constrained agent: satisfied, or by how much each constraint misses
+    (with ``mode``: of its deployed policy, where evaluated)."""
     constraints = _constraints(results)
     everything = _all_of(constraints)
     lines = []
     for agent in constrained:
-        if agent not in results:
+        entry = results.get(agent, {}).get("mode") if mode else results.get(agent)
+        if entry is None:
             continue
         misses = []
         for c in constraints:
-            value, bound = results[agent][c["metric"]]["mean"], thresholds[c["name"]]
+            value, bound = entry[c["metric"]]["mean"], thresholds[c["name"]]
             if value > bound:
                 unit = f" {c['unit']}" if c["unit"] == "dm" else ""
                 misses.append(f"{c['metric']} by {value - bound:.3f}{unit}")
-        per_seed = ", ".join("yes" if s else "no" for s in results[agent]["satisfied"])
+        per_seed = ", ".join("yes" if s else "no" for s in entry["satisfied"])
         held = "both hold per seed" if len(constraints) == 2 else "all hold per seed"
+        name = f"{agent}'s deployed policy (mode)" if mode else agent
         if misses:
-            lines.append(f"- {agent} misses on average: {'; '.join(misses)} "
+            lines.append(f"- {name} misses on average: {'; '.join(misses)} "
                          f"({held}: {per_seed}).")
         else:
-            lines.append(f"- {agent} satisfies {everything} on average "
+            lines.append(f"- {name} satisfies {everything} on average "
                          f"({held}: {per_seed}).")
     return lines
 
@@ -167,6 +175,12 @@ def table_markdown(document: dict[str, Any]) -> str:
                            f"{paper[a][metric][1]:.{paper_digits}f}" for a in agents]
             suffix = f" (paper, ≈ {PAPER_J_R_PER_METRE:g} per m)" if metric == "J_R" else " (paper)"
             rows.append(f"| {metric}{suffix} | " + " | ".join(paper_cells) + " | |")
+    with_mode = any("mode" in results[a] for a in agents)
+    if with_mode:
+        for metric, digits in (*((c["metric"], 3) for c in _constraints(results)), ("J_R", 2)):
+            cells = [_cell(results[a]["mode"][metric], digits) if "mode" in results[a] else "—"
+                     for a in agents]
+            rows.append(f"| {metric}, deployed policy (mode) | " + " | ".join(cells) + " | |")
     minutes = [s / 60 for a in agents for s in results[a]["train_seconds"]]
     obs = settings["obs"]
     lines = [
@@ -181,7 +195,10 @@ def table_markdown(document: dict[str, Any]) -> str:
         "time).",
         f"- Evaluation: {settings['episodes']} episodes per run of the sampled policy (the one "
         f"the constraints are learned for), spawn and sampling seed {settings['eval_seed']} "
-        "(never a training seed), the last checkpoint.",
+        "(never a training seed), the last checkpoint" + (
+            "; the rows marked *deployed policy (mode)* play the same episodes with the most "
+            "probable action, the policy `crllk.export` writes for the robot." if with_mode
+            else "."),
         f"- Command: `{settings['command']}` ({document['wall_s'] / 60:.1f} min wall for the "
         "invocation that finished it; finished runs are reused).",
         f"- Machine: {settings['machine']}.", "",
@@ -194,7 +211,8 @@ def table_markdown(document: dict[str, Any]) -> str:
                   "after at most 512 steps.", ""]
     constrained = [a for a in agents if a.startswith("CRLLK")]
     lines += ["Constraints (mean over seeds):", "",
-              *verdicts(results, constrained, thresholds)]
+              *verdicts(results, constrained, thresholds),
+              *(verdicts(results, constrained, thresholds, mode=True) if with_mode else [])]
     if document["pairs"]:
         lines += ["", "Against the fixed-weight baselines (same budget):", "",
                   *comparisons(results, document["pairs"])]

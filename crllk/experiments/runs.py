@@ -46,6 +46,9 @@ SWEEP_LANE_WEIGHTS = (0.3, 1.0, 3.0)
 """Fixed λ_lane of the sweep's PPO-D runs (per dm of lane deviation)."""
 SWEEP_COLLISION_WEIGHTS = (1.0, 4.0, 16.0, 64.0)
 """Fixed λ_coll of the sweep's PPO-D runs (per collision)."""
+MODE_EVALUATION = "eval-mode"
+"""Each run's evaluation of its deployed policy (``<run>/eval-mode.json``): the policy's mode,
+the most probable action, as ``crllk.export`` writes it for the robot."""
 
 
 @dataclass(frozen=True)
@@ -96,6 +99,9 @@ class Outcome:
 
     documents: dict[RunSpec, dict[str, Any]] = field(default_factory=dict)
     wall_s: float = 0.0
+    modes: dict[RunSpec, dict[str, Any]] = field(default_factory=dict)
+    """The evaluations of the deployed policy (:data:`MODE_EVALUATION`), of the runs that
+    have one."""
 
 
 # ----- running ------------------------------------------------------------------------------
@@ -110,9 +116,10 @@ def trained_frames(run_dir: Path) -> int:
     return 0
 
 
-def evaluation_is_current(run_dir: Path, settings: Settings, name: str | None = None) -> bool:
+def evaluation_is_current(run_dir: Path, settings: Settings, name: str | None = None,
+                          deterministic: bool = False) -> bool:
     """Whether ``eval.json`` (or ``<name>.json``) evaluated the last checkpoint with these
-    settings."""
+    settings (of the sampled policy, or with ``deterministic`` of its mode)."""
     path = run_dir / (EVAL_FILE if name is None else f"{name}.json")
     if not path.is_file():
         return False
@@ -121,7 +128,7 @@ def evaluation_is_current(run_dir: Path, settings: Settings, name: str | None = 
     return (document.get("source", {}).get("frames") == trained_frames(run_dir)
             and evaluation.get("episodes") == settings.episodes
             and evaluation.get("seed") == settings.eval_seed
-            and evaluation.get("deterministic") is False)
+            and evaluation.get("deterministic") is deterministic)
 
 
 def sweep_commands(specs: Sequence[RunSpec], settings: Settings) -> list[list[str]]:
@@ -216,7 +223,19 @@ def train_and_evaluate(specs: Sequence[RunSpec], settings: Settings) -> Outcome:
         raise RuntimeError("some runs did not finish (see " + str(log) + "):\n" + "\n".join(
             str(s.directory(root)) for s in unfinished))
     to_evaluate = [s for s in specs if not evaluation_is_current(s.directory(root), settings)]
-    print(f"evaluating {len(to_evaluate)} of {len(specs)} runs", flush=True)
-    evaluate_runs([(s.directory(root), {}) for s in to_evaluate], settings)
+    # the deployed policy of every run that still has its checkpoint
+    modes = [s for s in specs if (s.directory(root) / CHECKPOINT_FILE).is_file()
+             and not _mode_is_current(s.directory(root), settings)]
+    print(f"evaluating {len(to_evaluate)} of {len(specs)} runs, and the deployed policy (mode) "
+          f"of {len(modes)}", flush=True)
+    evaluate_runs([(s.directory(root), {}) for s in to_evaluate]
+                  + [(s.directory(root), {"name": MODE_EVALUATION, "deterministic": True})
+                     for s in modes], settings)
     documents = {s: read_eval_json(s.directory(root)) for s in specs}
-    return Outcome(documents, time.perf_counter() - started)
+    mode_documents = {s: json.loads((s.directory(root) / f"{MODE_EVALUATION}.json").read_text())
+                      for s in specs if _mode_is_current(s.directory(root), settings)}
+    return Outcome(documents, time.perf_counter() - started, mode_documents)
+
+
+def _mode_is_current(run_dir: Path, settings: Settings) -> bool:
+    return evaluation_is_current(run_dir, settings, MODE_EVALUATION, deterministic=True)
