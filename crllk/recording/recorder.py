@@ -112,6 +112,9 @@ Policy = Callable[[TensorDictBase], TensorDictBase]
 
 # ----- constants --------------------------------------------------------------------------
 VIEWERS = ("none", "spawn", "serve")
+FLUSH_TIMEOUT_S = 60.0
+"""The longest the final flush may wait for its sinks (s): rerun's own default is unbounded,
+and a sink that never answers must not hang a training run or a test."""
 _FAILED_VIEWERS: set[str] = set()
 """Viewer modes that failed in this process and are not tried again (``"spawn"``)."""
 _TILE_THICKNESS = 0.002
@@ -405,7 +408,7 @@ class _Recorder:
         try:
             if self.episode_stats:  # the same layout, with the episode plots' ranges
                 self.rec.send_blueprint(self.blueprint(), make_active=False, make_default=True)
-            self.rec.flush()
+            self.rec.flush(timeout_sec=FLUSH_TIMEOUT_S)
         except RuntimeError as err:
             problem = str(err)
         self.rec.disconnect()
