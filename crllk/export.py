@@ -17,7 +17,7 @@ from crllk.cli import run
 from crllk.deployment.export import export_run
 from crllk.files import write_problem
 from crllk.settings import MISSING, parse_dotlist, setting
-from crllk.training.runs import CHECKPOINT_FILE
+from crllk.training.runs import CHECKPOINT_FILE, POLICY_FILE, has_policy
 
 SOURCE = "export"
 
@@ -27,13 +27,15 @@ class ExportConfig:
     """Command-line settings (``key=value``)."""
 
     run: str = setting(MISSING)
-    """The run directory whose last checkpoint is exported."""
+    """The run directory whose last policy is exported (its last checkpoint, or where that is
+    gone its kept ``policy.pt``)."""
     out: str | None = None
     """The ONNX file to write (default: ``<run>/policy.onnx``)."""
 
     def problems(self) -> Iterator[tuple[str, str]]:
-        if not (Path(self.run) / CHECKPOINT_FILE).is_file():
-            yield "run", f"{self.run} holds no trained run (no {CHECKPOINT_FILE})"
+        if not has_policy(self.run):
+            yield "run", (f"{self.run} holds no trained run (neither {CHECKPOINT_FILE} nor "
+                          f"{POLICY_FILE})")
         problem = write_problem(self.out or Path(self.run) / "policy.onnx")
         if problem:
             yield "out", problem

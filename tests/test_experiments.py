@@ -109,19 +109,57 @@ def test_sweep_of_fixed_weights(tmp_path):
 
 
 def test_a_finished_run_without_its_checkpoint_is_reused(tiny_experiments, tmp_path):
-    """results/runs keeps runs without checkpoints: such a run counts as trained to the frames
-    of its eval.json and its evaluation as current, so nothing is trained again."""
+    """results/runs keeps runs with their policy but without checkpoints: such a run counts as
+    trained to its policy's frames, its evaluation as current, and it can be evaluated again;
+    without the policy too, the frames of its eval.json count."""
     import shutil
 
+    from crllk import export
+    from crllk.evaluation.runs import evaluate_run
     from crllk.experiments.runs import Settings, evaluation_is_current, trained_frames
+    from crllk.training.runs import POLICY_FILE, load_run_policy
 
     runs, _, _ = tiny_experiments
+    run = runs / "small_loop" / "CRLLK-D-a0.5-seed0"
     kept = tmp_path / "kept"
-    shutil.copytree(runs / "small_loop" / "CRLLK-D-a0.5-seed0", kept)
+    shutil.copytree(run, kept)
     shutil.rmtree(kept / "checkpoints")
+    assert (kept / POLICY_FILE).stat().st_size < 2_000_000
     assert trained_frames(kept) == 16
     assert evaluation_is_current(kept, Settings(frames=16, episodes=2))
+    again = evaluate_run(kept, episodes=2, seed=read_eval_json(run)["evaluation"]["seed"],
+                         name="again")
+    assert again["summary"] == read_eval_json(run)["summary"]
+    assert load_run_policy(kept).keys() == {"format", "iteration", "frames", "elapsed", "actor",
+                                            "multipliers"}
+    assert export.main([f"run={kept}", f"out={tmp_path / 'kept.onnx'}"]) == 0
+    assert (tmp_path / "kept.onnx").stat().st_size > 0
+    (kept / POLICY_FILE).unlink()
+    assert trained_frames(kept) == 16  # from eval.json
+    assert evaluation_is_current(kept, Settings(frames=16, episodes=2))
     assert trained_frames(tmp_path / "nothing") == 0
+
+
+def test_a_run_trained_before_policy_files_gets_one_from_its_checkpoint(tiny_experiments,
+                                                                         tmp_path):
+    import shutil
+
+    import torch
+
+    from crllk.training.runs import CHECKPOINT_FILE, POLICY_FILE, keep_policy, load_run_policy
+
+    runs, _, _ = tiny_experiments
+    old = tmp_path / "old"
+    shutil.copytree(runs / "small_loop" / "CRLLK-C-a0.5-seed0", old)
+    (old / POLICY_FILE).unlink()
+    assert keep_policy(old) == old / POLICY_FILE
+    checkpoint = torch.load(old / CHECKPOINT_FILE, weights_only=False)
+    shutil.rmtree(old / "checkpoints")
+    kept = load_run_policy(old)
+    assert kept["frames"] == checkpoint["frames"] == 16
+    for name, tensor in checkpoint["actor"].items():
+        assert torch.equal(kept["actor"][name], tensor)
+    assert keep_policy(old) is None  # nothing to keep it from
 
 
 @pytest.mark.slow

@@ -24,7 +24,7 @@ def evaluate_run(run_dir: str | Path, *, episodes: int, deterministic: bool = Fa
                  seed: int | None = None, num_envs: int = 10,
                  overrides: Mapping[str, Any] | None = None,
                  name: str | None = None) -> dict[str, Any]:
-    """Plays the run's checkpoint and writes ``<run_dir>/eval.json`` (or ``<name>.json``);
+    """Plays the run's last policy and writes ``<run_dir>/eval.json`` (or ``<name>.json``);
     returns its content. ``overrides`` change the run's task settings for this evaluation
     (e.g. ``{"randomize": {...}}`` or ``{"camera": {"robot_frames": True}}``)."""
     config = load_run_config(run_dir)

@@ -13,11 +13,12 @@ task=... seed=... resume=true``, one sweep per agent and setting, Hydra's joblib
 experiment picks up where its runs stopped and finished runs are not trained again. Each run is
 then evaluated (:func:`crllk.evaluation.runs.evaluate_run`, as ``python -m crllk.evaluate``; an
 ``eval.json`` of the same checkpoint and settings is reused; so is the policy it deploys, its
-mode, into ``eval-mode.json``, where the checkpoint is there) and the results are written to
+mode, into ``eval-mode.json``, where the policy is there) and the results are written to
 ``results/<obs>/``: a Markdown table with the paper's numbers beside ours and the JSON behind it,
 or the figures. Runs live in ``results/runs/<obs>/<task>/`` and are kept in the repository
-without their checkpoints (configuration, logs, ``eval.json``), so a finished run is reused by a
-later invocation even where its checkpoint is gone.
+without their checkpoints but with their policy (configuration, logs, ``eval.json``,
+``policy.pt``), so a finished run is reused by a later invocation, and can be evaluated again
+and exported, where its checkpoints are gone.
 """
 
 from __future__ import annotations

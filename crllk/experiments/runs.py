@@ -19,7 +19,13 @@ from joblib import Parallel, delayed
 from crllk.evaluation.report import PAPER_CONSTRAINTS, format_summary
 from crllk.evaluation.runs import evaluate_run
 from crllk.training.config import EVALUATION_SEED, algo_thresholds
-from crllk.training.runs import CHECKPOINT_FILE, EVAL_FILE, read_eval_json
+from crllk.training.runs import (
+    EVAL_FILE,
+    has_policy,
+    keep_policy,
+    load_run_policy,
+    read_eval_json,
+)
 
 SOURCE = "experiments"
 """How errors name where a bad option came from."""
@@ -106,11 +112,10 @@ class Outcome:
 
 # ----- running ------------------------------------------------------------------------------
 def trained_frames(run_dir: Path) -> int:
-    """Frames in the run's last checkpoint; without one, those of its ``eval.json`` (a
-    finished run kept without its checkpoint, as ``results/runs`` keeps them); else 0."""
-    path = run_dir / CHECKPOINT_FILE
-    if path.is_file():
-        return int(torch.load(path, map_location="cpu", weights_only=False)["frames"])
+    """Frames of the run's last policy (its checkpoint, or the ``policy.pt`` that
+    ``results/runs`` keeps); without either, those of its ``eval.json``; else 0."""
+    if has_policy(run_dir):
+        return int(load_run_policy(run_dir)["frames"])
     if (run_dir / EVAL_FILE).is_file():
         return int(read_eval_json(run_dir).get("source", {}).get("frames", 0))
     return 0
@@ -223,8 +228,10 @@ def train_and_evaluate(specs: Sequence[RunSpec], settings: Settings) -> Outcome:
         raise RuntimeError("some runs did not finish (see " + str(log) + "):\n" + "\n".join(
             str(s.directory(root)) for s in unfinished))
     to_evaluate = [s for s in specs if not evaluation_is_current(s.directory(root), settings)]
-    # the deployed policy of every run that still has its checkpoint
-    modes = [s for s in specs if (s.directory(root) / CHECKPOINT_FILE).is_file()
+    for spec in specs:  # runs trained before the trainer kept its policy beside the checkpoints
+        keep_policy(spec.directory(root))
+    # the deployed policy of every run that has one
+    modes = [s for s in specs if has_policy(s.directory(root))
              and not _mode_is_current(s.directory(root), settings)]
     print(f"evaluating {len(to_evaluate)} of {len(specs)} runs, and the deployed policy (mode) "
           f"of {len(modes)}", flush=True)

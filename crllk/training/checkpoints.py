@@ -27,6 +27,19 @@ def save_checkpoint(path: str | Path, state: dict[str, Any]) -> Path:
         {"format": CHECKPOINT_FORMAT, **state}, handle))
 
 
+POLICY_FILE = Path("policy.pt")
+"""A run's kept policy, beside ``config.yaml``: written with every checkpoint, and kept where
+the checkpoints are not (``results/runs``)."""
+POLICY_KEYS = ("iteration", "frames", "elapsed", "actor", "multipliers")
+"""What a run's kept policy file holds: enough to act, evaluate and export, not to resume."""
+
+
+def policy_state(state: dict[str, Any]) -> dict[str, Any]:
+    """The part of a checkpoint's ``state`` that :data:`POLICY_KEYS` names (a few hundred kB
+    where the whole checkpoint, optimiser and simulations included, is many MB)."""
+    return {key: state[key] for key in POLICY_KEYS}
+
+
 def load_checkpoint(path: str | Path) -> dict[str, Any]:
     """Loads a checkpoint written by :func:`save_checkpoint`."""
     path = Path(path)

@@ -42,7 +42,14 @@ from crllk.rl.lagrange import Multiplier
 from crllk.rl.rollout import collect, run_episodes
 from crllk.tasks.constraints import Constraint
 from crllk.training.build import Learner, TrainingEnv, build_env, build_run
-from crllk.training.checkpoints import checkpoint_state, load_checkpoint, restore, save_checkpoint
+from crllk.training.checkpoints import (
+    POLICY_FILE,
+    checkpoint_state,
+    load_checkpoint,
+    policy_state,
+    restore,
+    save_checkpoint,
+)
 from crllk.training.config import TrainConfig
 from crllk.training.logs import (
     CsvLog,
@@ -132,9 +139,11 @@ def train(config: TrainConfig) -> Path:
             if live is not None and recording is not None:
                 live.add_recording(recording)
         if iteration % config.checkpoint_every == 0 or frames >= config.total_frames:
-            save_checkpoint(checkpoint_path, checkpoint_state(
+            state = checkpoint_state(
                 config, learner, multipliers, episodes, env, generator, carry,
-                iteration=iteration, frames=frames, elapsed=time.perf_counter() - started))
+                iteration=iteration, frames=frames, elapsed=time.perf_counter() - started)
+            save_checkpoint(checkpoint_path, state)
+            save_checkpoint(run_dir / POLICY_FILE, policy_state(state))
     bar.close()
     if live is not None:
         live.close()

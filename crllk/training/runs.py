@@ -2,7 +2,10 @@
 
 A run directory (``python -m crllk.train``) holds ``config.yaml``, ``metrics.csv`` (one row per
 iteration), ``eval.csv`` (one row per periodic evaluation), ``checkpoints/last.pt`` and, once
-``python -m crllk.evaluate`` has run, ``eval.json``.
+``python -m crllk.evaluate`` has run, ``eval.json``. With every checkpoint the trainer also
+writes ``policy.pt``, the policy alone (:func:`crllk.training.checkpoints.policy_state`): a run
+kept without its checkpoints (as ``results/runs`` keeps them) can still be evaluated and
+exported.
 """
 
 from __future__ import annotations
@@ -19,7 +22,7 @@ from omegaconf import OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
 from crllk.errors import ConfigError
-from crllk.training.checkpoints import load_checkpoint
+from crllk.training.checkpoints import POLICY_FILE, load_checkpoint, policy_state, save_checkpoint
 from crllk.training.config import TrainConfig, upgrade, validate
 
 CONFIG_FILE = "config.yaml"
@@ -56,13 +59,46 @@ def load_run_checkpoint(run_dir: str | Path) -> dict[str, Any]:
     return load_checkpoint(path)
 
 
+def has_policy(run_dir: str | Path) -> bool:
+    """Whether the run has a policy to act with: a checkpoint or its kept ``policy.pt``."""
+    return (Path(run_dir) / CHECKPOINT_FILE).is_file() or (Path(run_dir) / POLICY_FILE).is_file()
+
+
+def load_run_policy(run_dir: str | Path) -> dict[str, Any]:
+    """The run's last policy (:data:`crllk.training.checkpoints.POLICY_KEYS`): from its last
+    checkpoint, or where that is gone from its kept ``policy.pt``.
+
+    Raises:
+        ConfigError: if the run has neither.
+    """
+    run_dir = Path(run_dir)
+    if (run_dir / CHECKPOINT_FILE).is_file():
+        return policy_state(load_checkpoint(run_dir / CHECKPOINT_FILE))
+    if (run_dir / POLICY_FILE).is_file():
+        return load_checkpoint(run_dir / POLICY_FILE)
+    raise ConfigError(run_dir, "run", f"no trained policy yet (neither {CHECKPOINT_FILE} nor "
+                      f"{POLICY_FILE})")
+
+
+def keep_policy(run_dir: str | Path) -> Path | None:
+    """Writes ``policy.pt`` from the run's last checkpoint when it is missing or older (runs
+    trained before the trainer wrote it); returns its path, or None without a checkpoint."""
+    run_dir = Path(run_dir)
+    checkpoint, kept = run_dir / CHECKPOINT_FILE, run_dir / POLICY_FILE
+    if not checkpoint.is_file():
+        return None
+    if kept.is_file() and kept.stat().st_mtime >= checkpoint.stat().st_mtime:
+        return kept
+    return save_checkpoint(kept, policy_state(load_checkpoint(checkpoint)))
+
+
 def load_actor(run_dir: str | Path, env: Any) -> tuple[torch.nn.Module, dict[str, Any]]:
-    """The run's policy with its checkpoint weights, built for ``env``, and the checkpoint's
-    counters (``iteration``, ``frames``, ``elapsed``) and multipliers."""
+    """The run's policy (:func:`load_run_policy`) built for ``env``, and its counters
+    (``iteration``, ``frames``, ``elapsed``) and multipliers."""
     from crllk.training.build import build_learner
 
     config = load_run_config(run_dir)
-    state = load_run_checkpoint(run_dir)
+    state = load_run_policy(run_dir)
     actor = build_learner(config, env).actor
     actor.load_state_dict(state["actor"])
     actor.eval()
@@ -108,5 +144,6 @@ def _number(text: str | None) -> float:
         return math.nan
 
 
-__all__ = ["CHECKPOINT_FILE", "CONFIG_FILE", "EVAL_FILE", "load_actor", "load_run_checkpoint",
-           "load_run_config", "read_csv", "read_eval_json", "read_evaluations", "read_metrics"]
+__all__ = ["CHECKPOINT_FILE", "CONFIG_FILE", "EVAL_FILE", "POLICY_FILE", "has_policy",
+           "keep_policy", "load_actor", "load_run_checkpoint", "load_run_config",
+           "load_run_policy", "read_csv", "read_eval_json", "read_evaluations", "read_metrics"]
