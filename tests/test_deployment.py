@@ -201,6 +201,20 @@ def test_bad_input_is_one_line(tmp_path, capsys, command, argv, words):
     assert len(err.splitlines()) == 1
 
 
+@pytest.mark.parametrize("history", ["[0, 1]", "[2]", "[2, -3]", "two"])
+def test_a_policy_with_bad_history_metadata_is_one_line(pixel_policy, history):
+    """An exported file whose ``crllk.history`` was edited by hand: a ConfigError naming the
+    file and the metadata, not a traceback."""
+    from crllk.errors import ConfigError
+
+    pilot = Pilot.from_onnx(pixel_policy)
+    metadata = {**pilot.metadata, "history": history}
+    with pytest.raises(ConfigError) as error:
+        Pilot(pilot.session, metadata, str(pixel_policy))
+    assert str(error.value).startswith(f"{pixel_policy}: metadata: not a crllk policy")
+    assert "\n" not in str(error.value)
+
+
 def test_frames_that_are_not_frames(tmp_path):
     from crllk.errors import ConfigError
 

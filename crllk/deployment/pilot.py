@@ -49,13 +49,13 @@ class Pilot:
             self.action = metadata["action"]
             self.observation_shape = tuple(json.loads(metadata["observation_shape"]))
             count, stride = json.loads(metadata.get("history", "[1, 1]"))
+            self.history = (FrameHistory(1, (*self.observation_shape[:2], 3), count, stride)
+                            if self.observation == "pixels" else None)
+            """The images the policy remembers (pixel policies)."""
         except (KeyError, ValueError, TypeError):
             raise ConfigError(source, "metadata", "not a crllk policy (export it with "
                               "python -m crllk.export)") from None
         self.metadata = metadata
-        self.history = (FrameHistory(1, (*self.observation_shape[:2], 3), count, stride)
-                        if self.observation == "pixels" else None)
-        """The images the policy remembers (pixel policies)."""
         self._fresh = True
 
     def reset(self) -> None:
