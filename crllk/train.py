@@ -3,8 +3,9 @@
 Hydra composes the configuration (:mod:`crllk.training.compose`: the schema
 :class:`~crllk.training.config.TrainConfig`, the groups in ``crllk/conf``, and every
 ``tasks/<name>.yaml`` as a choice of the ``task`` group), :func:`resolve_config` checks it
-(a resumed run keeps its saved settings) and :func:`crllk.training.loop.train` trains; bad
-input ends with one line and exit status 2.
+(a resumed run keeps its saved settings) and :func:`crllk.training.loop.train` trains; the
+evaluation it makes at the end becomes the run's ``eval.json``, as ``python -m crllk.evaluate``
+writes it. Bad input ends with one line and exit status 2.
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ from omegaconf import DictConfig, OmegaConf
 import crllk  # noqa: F401  (chooses the headless GL backend before torchrl imports mujoco)
 from crllk.cli import exit_status
 from crllk.errors import ConfigError
+from crllk.evaluation.runs import write_final_evaluation
 from crllk.training.compose import (
     compose_config,
     launcher_problems,
@@ -51,7 +53,8 @@ register()
 
 @hydra.main(version_base="1.3", config_path="conf", config_name="train")
 def main(cfg: DictConfig) -> None:
-    status = exit_status(lambda: train(resolve_config(cfg)))
+    status = exit_status(lambda: train(resolve_config(cfg),
+                                       on_final_evaluation=write_final_evaluation))
     if status:
         raise SystemExit(status)
 

@@ -87,6 +87,21 @@ def test_agents_choose_the_columns(tiny_experiments, tmp_path):
     assert rejected.returncode == 2 and "invalid choice: 'SAC'" in rejected.stderr
 
 
+def test_the_trainer_s_final_evaluation_is_not_played_again(tmp_path):
+    """A run whose final evaluation used crllk.evaluate's settings (episodes, seed and its ten
+    simulations) has its eval.json from the trainer: the experiment evaluates only its mode."""
+    completed = subprocess.run(
+        [sys.executable, "-m", "crllk.experiments", "table1", *TINY_EXPERIMENT,
+         "eval.num_envs=10", "--agents", "CRLLK-D", "--runs-root", str(tmp_path / "runs"),
+         "--results", str(tmp_path / "results")], cwd=REPO, capture_output=True, text=True,
+        timeout=300)
+    assert completed.returncode == 0, completed.stdout[-2000:] + completed.stderr[-2000:]
+    assert "evaluating 0 of 1 runs, and the deployed policy (mode) of 1" in completed.stdout
+    run = tmp_path / "runs" / "pixels" / "small_loop" / "CRLLK-D-a0.5-seed0"
+    assert read_eval_json(run)["evaluation"] == {"episodes": 2, "seed": 1_000_000,
+                                                 "num_envs": 10, "deterministic": False}
+
+
 def test_sweep_of_fixed_weights(tmp_path):
     """A 1 × 2 weight grid on one map from state: the JSON holds every pair and CRLLK-D, the
     Markdown is rebuilt from it, the figure is a PNG."""

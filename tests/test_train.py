@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import math
 import signal
 import subprocess
@@ -146,6 +147,8 @@ def test_command_line_run_prints_its_directory(tmp_path):
     assert result.returncode == 0, result.stderr[-2000:]
     assert f"run directory: {tmp_path / 'cli'}" in result.stdout
     assert (tmp_path / "cli" / "metrics.csv").exists()
+    written = json.loads((tmp_path / "cli" / "eval.json").read_text())  # the last evaluation
+    assert written["evaluation"]["episodes"] == 100 and written["source"]["frames"] == 16
 
 
 def test_existing_run_is_not_overwritten(tmp_path):
@@ -283,20 +286,25 @@ def test_bad_teacher_and_encounter_overrides(override, field):
 
 
 def test_last_evaluation_row_agrees_with_crllk_evaluate(tmp_path):
-    """The evaluation written at the end of training is the one python -m crllk.evaluate
-    makes of the last checkpoint with the same episodes: same numbers, same verdict."""
-    from crllk.evaluation.runs import evaluate_run
+    """The evaluation made at the end of training is the one python -m crllk.evaluate makes
+    of the last checkpoint with the same episodes: same numbers, same verdict; the trainer's
+    command writes it as eval.json, the document crllk.evaluate writes."""
+    from crllk.evaluation.runs import evaluate_run, write_final_evaluation
 
     run = run_in_process(tmp_path / "run", 2, ["task=obstacle_loop", "obs=state",
                                                "eval.every=5", "eval.episodes=4",
-                                               "eval.num_envs=2", "task.horizon=40"])
+                                               "eval.num_envs=2", "task.horizon=40"],
+                         on_final_evaluation=write_final_evaluation)
     last = read_rows(run / "eval.csv")[-1]
     assert int(last["iteration"]) == 2  # not a multiple of eval.every: the final evaluation
-    document = evaluate_run(run, episodes=4, num_envs=2)
+    written = json.loads((run / "eval.json").read_text())
+    document = evaluate_run(run, episodes=4, num_envs=2, name="again")
     summary = document["summary"]
     for key in ("J_R", "J_clane", "J_coll"):
         assert float(last[key]) == pytest.approx(summary[key], rel=1e-5), key
     assert bool(int(last["satisfied"])) == summary["satisfied"]
+    assert written == document
+    assert written["source"]["frames"] == 2 * FRAMES_PER_ITERATION
 
 
 def test_task_takes_a_name_or_a_path_when_composed(tmp_path):

@@ -21,11 +21,12 @@ TINY = [f"num_envs={NUM_ENVS}", f"rollout_steps={ROLLOUT}", "ppo.minibatch_size=
 
 
 def run_in_process(run_dir: Path, iterations: int, extra: list[str] = (), *,
-                   frames_per_iteration: int = FRAMES_PER_ITERATION) -> Path:
+                   frames_per_iteration: int = FRAMES_PER_ITERATION,
+                   on_final_evaluation=None) -> Path:
     """Trains ``iterations`` tiny iterations into ``run_dir`` and returns it."""
     cfg = compose_config([*TINY, f"run_dir={run_dir}",
                           f"total_frames={iterations * frames_per_iteration}", *extra])
-    return train(resolve_config(cfg))
+    return train(resolve_config(cfg), on_final_evaluation=on_final_evaluation)
 
 
 def read_rows(path: Path) -> list[dict[str, str]]:

@@ -10,18 +10,22 @@ from typing import Any
 
 from omegaconf import OmegaConf
 
-from crllk.envs.batched import make_env
+from crllk.envs.batched import BatchedLaneKeepingEnv, make_env
 from crllk.evaluation.report import result_document
 from crllk.files import atomic_write_text
-from crllk.rl.rollout import run_episodes
+from crllk.rl.rollout import EvaluationResult, run_episodes
 from crllk.tasks.follower import FollowerGains, FollowerPolicy
 from crllk.training.build import build_env
-from crllk.training.config import EVALUATION_SEED, algo_thresholds
+from crllk.training.config import EVALUATION_SEED, TrainConfig, algo_thresholds
 from crllk.training.runs import EVAL_FILE, load_actor, load_run_config
+
+EVALUATION_ENVS = 10
+"""Simulations of an evaluation (episode k runs in simulation k mod this): ``crllk.evaluate``'s
+default and the trainer's (``eval.num_envs``)."""
 
 
 def evaluate_run(run_dir: str | Path, *, episodes: int, deterministic: bool = False,
-                 seed: int | None = None, num_envs: int = 10,
+                 seed: int | None = None, num_envs: int = EVALUATION_ENVS,
                  overrides: Mapping[str, Any] | None = None,
                  name: str | None = None) -> dict[str, Any]:
     """Plays the run's last policy and writes ``<run_dir>/eval.json`` (or ``<name>.json``);
@@ -38,11 +42,23 @@ def evaluate_run(run_dir: str | Path, *, episodes: int, deterministic: bool = Fa
                               sample_seed=seed)
     finally:
         env.close()
+    return write_evaluation(run_dir, config, env, result, info,
+                            settings={"episodes": episodes, "seed": seed, "num_envs": num_envs,
+                                      "deterministic": deterministic},
+                            overrides=overrides, name=name)
+
+
+def write_evaluation(run_dir: str | Path, config: TrainConfig, env: BatchedLaneKeepingEnv,
+                     result: EvaluationResult, info: dict[str, Any], *,
+                     settings: dict[str, Any], overrides: Mapping[str, Any] | None = None,
+                     name: str | None = None) -> dict[str, Any]:
+    """Writes the evaluation document of a run's episodes ``result`` (played in ``env`` with
+    ``settings``) to ``<run_dir>/eval.json`` (or ``<name>.json``) and returns it; ``info``
+    holds the policy's counters and multipliers."""
     source = {"run_dir": str(run_dir), "task": config.task_name, "algo": config.algo.name,
               "action": config.action.name, "obs": config.obs.name, "train_seed": config.seed,
               **info}
-    settings = {"episodes": episodes, "seed": seed, "num_envs": num_envs,
-                "deterministic": deterministic}
+    settings = dict(settings)
     if overrides:
         settings["task_overrides"] = dict(overrides)
     thresholds = {c.name: config.algo.constraints[c.name].threshold
@@ -55,8 +71,19 @@ def evaluate_run(run_dir: str | Path, *, episodes: int, deterministic: bool = Fa
     return document
 
 
+def write_final_evaluation(run_dir: Path, config: TrainConfig, env: BatchedLaneKeepingEnv,
+                           result: EvaluationResult, info: dict[str, Any]) -> None:
+    """``eval.json`` from the evaluation the trainer makes at the end of training
+    (``eval.episodes`` sampled episodes from ``eval.seed``): what ``python -m crllk.evaluate
+    run=DIR`` would write of the final policy with those settings, without playing the
+    episodes again."""
+    write_evaluation(run_dir, config, env, result, info,
+                     settings={"episodes": config.eval.episodes, "seed": config.eval.seed,
+                               "num_envs": config.eval.num_envs, "deterministic": False})
+
+
 def evaluate_follower(task: str | Path, *, episodes: int, seed: int = EVALUATION_SEED,
-                      num_envs: int = 10, thresholds: dict[str, float] | None = None,
+                      num_envs: int = EVALUATION_ENVS, thresholds: dict[str, float] | None = None,
                       avoid_obstacles: bool = False, action: str = "duty",
                       margin: float = FollowerGains.avoid_margin) -> dict[str, Any]:
     """The scripted lane follower through the same episodes and metrics as a run; with

@@ -12,7 +12,9 @@ task=... seed=... resume=true``, one sweep per agent and setting, Hydra's joblib
 ``--jobs`` at a time, one per core; output in ``<runs-root>/sweeps.log``), so an interrupted
 experiment picks up where its runs stopped and finished runs are not trained again. Each run is
 then evaluated (:func:`crllk.evaluation.runs.evaluate_run`, as ``python -m crllk.evaluate``; an
-``eval.json`` of the same checkpoint and settings is reused; so is the policy it deploys, its
+``eval.json`` of the same policy and settings is reused, as the one the trainer writes from its
+final evaluation, which the runs make with the experiment's episodes and seed; so is the policy
+it deploys, its
 mode, into ``eval-mode.json``, where the policy is there) and the results are written to
 ``results/<obs>/``: a Markdown table with the paper's numbers beside ours and the JSON behind it,
 or the figures. Runs live in ``results/runs/<obs>/<task>/`` and are kept in the repository

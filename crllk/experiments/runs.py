@@ -17,7 +17,7 @@ import torch
 from joblib import Parallel, delayed
 
 from crllk.evaluation.report import PAPER_CONSTRAINTS, format_summary
-from crllk.evaluation.runs import evaluate_run
+from crllk.evaluation.runs import EVALUATION_ENVS, evaluate_run
 from crllk.training.config import EVALUATION_SEED, algo_thresholds
 from crllk.training.runs import (
     EVAL_FILE,
@@ -123,8 +123,9 @@ def trained_frames(run_dir: Path) -> int:
 
 def evaluation_is_current(run_dir: Path, settings: Settings, name: str | None = None,
                           deterministic: bool = False) -> bool:
-    """Whether ``eval.json`` (or ``<name>.json``) evaluated the last checkpoint with these
-    settings (of the sampled policy, or with ``deterministic`` of its mode)."""
+    """Whether ``eval.json`` (or ``<name>.json``) evaluated the last policy with these settings
+    and ``crllk.evaluate``'s simulations (of the sampled policy, or with ``deterministic`` of
+    its mode): the trainer's final evaluation counts when its settings are these."""
     path = run_dir / (EVAL_FILE if name is None else f"{name}.json")
     if not path.is_file():
         return False
@@ -133,6 +134,7 @@ def evaluation_is_current(run_dir: Path, settings: Settings, name: str | None = 
     return (document.get("source", {}).get("frames") == trained_frames(run_dir)
             and evaluation.get("episodes") == settings.episodes
             and evaluation.get("seed") == settings.eval_seed
+            and evaluation.get("num_envs", EVALUATION_ENVS) == EVALUATION_ENVS
             and evaluation.get("deterministic") is deterministic)
 
 
@@ -176,7 +178,8 @@ def _sweep_command(specs: Sequence[RunSpec], settings: Settings) -> list[str]:
             f"task={values('task')}", f"seed={values('seed')}", f"obs={settings.obs}",
             f"algo.constraints.lane.threshold={spec.lane_threshold}",
             f"algo.constraints.collision.threshold={THRESHOLDS['collision']}",
-            f"total_frames={settings.frames}",
+            f"total_frames={settings.frames}", f"eval.episodes={settings.episodes}",
+            f"eval.seed={settings.eval_seed}",
             f"run_dir={settings.runs_root}/${{task.name}}/{name}-seed${{seed}}",
             "resume=true", "progress=false", "threads=1",
             f"hydra.launcher.n_jobs={settings.jobs}", *settings.train_overrides, *spec.extra]

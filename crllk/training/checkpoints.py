@@ -40,6 +40,15 @@ def policy_state(state: dict[str, Any]) -> dict[str, Any]:
     return {key: state[key] for key in POLICY_KEYS}
 
 
+def policy_info(state: dict[str, Any]) -> dict[str, Any]:
+    """A checkpoint's (or kept policy's) counters and multiplier values: ``iteration``,
+    ``frames``, ``elapsed_s`` and ``multipliers`` (by constraint name)."""
+    return {"iteration": int(state["iteration"]), "frames": int(state["frames"]),
+            "elapsed_s": float(state["elapsed"]),
+            "multipliers": {name: float(m["state"]["value"])
+                            for name, m in state["multipliers"].items()}}
+
+
 def load_checkpoint(path: str | Path) -> dict[str, Any]:
     """Loads a checkpoint written by :func:`save_checkpoint`."""
     path = Path(path)

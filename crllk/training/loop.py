@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -39,13 +39,14 @@ from crllk.envs.episodes import EpisodeAccumulator, EpisodeStats, summarise
 from crllk.errors import ConfigError
 from crllk.files import atomic_write_text
 from crllk.rl.lagrange import Multiplier
-from crllk.rl.rollout import collect, run_episodes
+from crllk.rl.rollout import EvaluationResult, collect, run_episodes
 from crllk.tasks.constraints import Constraint
 from crllk.training.build import Learner, TrainingEnv, build_env, build_run
 from crllk.training.checkpoints import (
     POLICY_FILE,
     checkpoint_state,
     load_checkpoint,
+    policy_info,
     policy_state,
     restore,
     save_checkpoint,
@@ -67,8 +68,18 @@ if TYPE_CHECKING:
     from crllk.recording.live import LiveView
 
 
-def train(config: TrainConfig) -> Path:
-    """Trains (or resumes) one run; returns its directory."""
+FinalEvaluation = Callable[[Path, TrainConfig, BatchedLaneKeepingEnv, EvaluationResult,
+                           dict[str, Any]], None]
+"""Called with the run directory, its configuration, the evaluation env, the episodes of the
+evaluation made at the end of training and the final policy's counters and multipliers
+(``iteration``, ``frames``, ``elapsed_s``, ``multipliers``, as
+:func:`crllk.training.runs.load_actor` gives them)."""
+
+
+def train(config: TrainConfig, on_final_evaluation: FinalEvaluation | None = None) -> Path:
+    """Trains (or resumes) one run; returns its directory. ``on_final_evaluation`` receives
+    the evaluation made at the end of training, once the final checkpoint is saved
+    (``python -m crllk.train`` writes it as ``eval.json``)."""
     run_dir = config.resolved_run_dir()
     checkpoint_path = run_dir / "checkpoints" / "last.pt"
     env, learner, multipliers, generator = build_run(config)
@@ -84,7 +95,7 @@ def train(config: TrainConfig) -> Path:
     metrics = CsvLog(run_dir / "metrics.csv",
                      metric_columns(config.action.name, constraints, learner.loss.out_keys))
     evaluations = CsvLog(run_dir / "eval.csv", eval_columns(constraints))
-    eval_env = record_env = None
+    eval_env = record_env = final_result = None
     iteration, frames, elapsed = 0, 0, 0.0
 
     if resuming:
@@ -130,8 +141,10 @@ def train(config: TrainConfig) -> Path:
                                   or frames >= config.total_frames):
             if eval_env is None:
                 eval_env = build_env(config, num_envs=config.eval.num_envs, seed=config.eval.seed)
-            evaluations.append(evaluate(config, eval_env, learner, iteration, frames,
-                                        time.perf_counter() - started))
+            row, result = evaluate(config, eval_env, learner, iteration, frames,
+                                   time.perf_counter() - started)
+            evaluations.append(row)
+            final_result = result if frames >= config.total_frames else None
         if config.record_every and iteration % config.record_every == 0:
             if record_env is None:
                 record_env = build_env(config, num_envs=1, seed=config.eval.seed)
@@ -144,6 +157,8 @@ def train(config: TrainConfig) -> Path:
                 iteration=iteration, frames=frames, elapsed=time.perf_counter() - started)
             save_checkpoint(checkpoint_path, state)
             save_checkpoint(run_dir / POLICY_FILE, policy_state(state))
+            if final_result is not None and on_final_evaluation is not None:
+                on_final_evaluation(run_dir, config, eval_env, final_result, policy_info(state))
     bar.close()
     if live is not None:
         live.close()
@@ -226,18 +241,20 @@ def episode_columns(finished: Sequence[EpisodeStats], constraints: Sequence[Cons
 
 
 def evaluate(config: TrainConfig, env: BatchedLaneKeepingEnv, learner: Learner, iteration: int,
-             frames: int, time_s: float) -> dict[str, Any]:
+             frames: int, time_s: float) -> tuple[dict[str, Any], EvaluationResult]:
     """Episodes of the sampled policy from the evaluation seed (spawns and action samples),
-    as ``python -m crllk.evaluate`` plays them; whether every constraint holds."""
+    as ``python -m crllk.evaluate`` plays them: the ``eval.csv`` row (with whether every
+    constraint holds) and the episodes."""
     began = time.perf_counter()
     env.set_seed(config.eval.seed)
-    summary = run_episodes(env, learner.actor, config.eval.episodes, deterministic=False,
-                           sample_seed=config.eval.seed).summary
+    result = run_episodes(env, learner.actor, config.eval.episodes, deterministic=False,
+                          sample_seed=config.eval.seed)
+    summary = result.summary
     satisfied = all(summary.J[c.metric] <= config.algo.constraints[c.name].threshold
                     for c in env.constraints)
     return {"iteration": iteration, "frames": frames, "time_s": time_s, **summary.as_row(),
             "episode_length": summary.length, "satisfied": int(satisfied),
-            "evaluation_s": time.perf_counter() - began}
+            "evaluation_s": time.perf_counter() - began}, result
 
 
 def open_live_view(config: TrainConfig, run_dir: Path, constraints: Sequence[Constraint]

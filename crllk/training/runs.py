@@ -22,7 +22,13 @@ from omegaconf import OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
 from crllk.errors import ConfigError
-from crllk.training.checkpoints import POLICY_FILE, load_checkpoint, policy_state, save_checkpoint
+from crllk.training.checkpoints import (
+    POLICY_FILE,
+    load_checkpoint,
+    policy_info,
+    policy_state,
+    save_checkpoint,
+)
 from crllk.training.config import TrainConfig, upgrade, validate
 
 CONFIG_FILE = "config.yaml"
@@ -102,11 +108,7 @@ def load_actor(run_dir: str | Path, env: Any) -> tuple[torch.nn.Module, dict[str
     actor = build_learner(config, env).actor
     actor.load_state_dict(state["actor"])
     actor.eval()
-    multipliers = {name: float(m["state"]["value"])
-                   for name, m in state["multipliers"].items()}
-    info = {"iteration": int(state["iteration"]), "frames": int(state["frames"]),
-            "elapsed_s": float(state["elapsed"]), "multipliers": multipliers}
-    return actor, info
+    return actor, policy_info(state)
 
 
 def read_csv(path: str | Path) -> dict[str, np.ndarray]:
