@@ -177,6 +177,32 @@ def test_a_run_trained_before_policy_files_gets_one_from_its_checkpoint(tiny_exp
     assert keep_policy(old) is None  # nothing to keep it from
 
 
+def test_a_run_kept_without_its_policy_is_trained_again_when_its_policy_is_needed(
+        tiny_experiments, tmp_path, capsys):
+    """A finished run kept with neither checkpoint nor policy.pt counts as trained, unless an
+    experiment needs its policy (the robustness evaluations): then it is trained again."""
+    import shutil
+
+    from crllk.experiments.runs import RunSpec, Settings, train_and_evaluate, trained_frames
+    from crllk.training.runs import POLICY_FILE, has_policy
+
+    runs, _, _ = tiny_experiments
+    root = tmp_path / "pixels"
+    spec = RunSpec("CRLLK-D", "small_loop", 0)
+    shutil.copytree(runs / "small_loop" / "CRLLK-D-a0.5-seed0", spec.directory(root))
+    shutil.rmtree(spec.directory(root) / "checkpoints")
+    (spec.directory(root) / POLICY_FILE).unlink()
+    settings = Settings(frames=16, seeds=(0,), episodes=2, jobs=1, runs_root=root,
+                        train_overrides=tuple(TINY_EXPERIMENT[TINY_EXPERIMENT.index("--set")
+                                                               + 1:]))
+    train_and_evaluate([spec], settings)
+    assert "training 0 of 1 runs" in capsys.readouterr().out
+    assert not has_policy(spec.directory(root)) and trained_frames(spec.directory(root)) == 16
+    train_and_evaluate([spec], settings, policies=[spec])
+    assert "training 1 of 1 runs" in capsys.readouterr().out
+    assert has_policy(spec.directory(root))
+
+
 @pytest.mark.slow
 def test_robustness_at_a_tiny_budget(tmp_path):
     """``experiments robustness``: CRLLK-D trained without and with randomisation, each

@@ -103,10 +103,13 @@ def robustness(settings: Settings) -> list[Path]:
     from crllk.analysis.figures import draw_robustness, save_figure
 
     specs = robustness_specs(settings)
-    train_and_evaluate(specs, settings)
     table = conditions() if not settings.conditions else \
         {name: overrides for name, overrides in conditions().items()
          if name in settings.conditions}
+    unevaluated = [s for s in specs if not all(
+        evaluation_is_current(s.directory(settings.runs_root), settings, result_name(name))
+        for name in table)]
+    train_and_evaluate(specs, settings, policies=unevaluated)
     document = robustness_document(evaluate_conditions(specs, settings, table), settings, table)
     out = settings.results
     written = [atomic_write_text(out / "robustness.json", json.dumps(document, indent=1) + "\n"),

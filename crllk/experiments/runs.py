@@ -216,17 +216,21 @@ def _evaluate(run_dir: Path, **kwargs: Any) -> None:
     print(format_summary(evaluate_run(run_dir, **kwargs)), flush=True)
 
 
-def train_and_evaluate(specs: Sequence[RunSpec], settings: Settings) -> Outcome:
-    """Trains the unfinished runs (trainer multiruns), evaluates the unevaluated ones,
-    returns every evaluation."""
+def train_and_evaluate(specs: Sequence[RunSpec], settings: Settings,
+                       policies: Sequence[RunSpec] = ()) -> Outcome:
+    """Trains the unfinished runs (trainer multiruns), and those of ``policies`` that are
+    finished but kept without a policy (trained again: their policy is needed); evaluates the
+    unevaluated ones; returns every evaluation."""
     started = time.perf_counter()
     root = settings.runs_root
-    to_train = [s for s in specs if trained_frames(s.directory(root)) < settings.frames]
+    to_train = [s for s in specs if trained_frames(s.directory(root)) < settings.frames
+                or (s in policies and not has_policy(s.directory(root)))]
     print(f"training {len(to_train)} of {len(specs)} runs ({settings.jobs} at a time)",
           flush=True)
     log = root / "sweeps.log"
     run_sweeps(sweep_commands(to_train, settings), log)
-    unfinished = [s for s in to_train if trained_frames(s.directory(root)) < settings.frames]
+    unfinished = [s for s in to_train if trained_frames(s.directory(root)) < settings.frames
+                  or not has_policy(s.directory(root))]
     if unfinished:
         raise RuntimeError("some runs did not finish (see " + str(log) + "):\n" + "\n".join(
             str(s.directory(root)) for s in unfinished))
