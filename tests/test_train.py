@@ -170,6 +170,8 @@ def test_existing_run_is_not_overwritten(tmp_path):
     ("seed", "override: seed: cannot parse this override"),
     ("ppo.gamma=1.5", "ppo.gamma: must lie in [0, 1]"),
     ("obs.history=0", "obs.history: must be > 0"),
+    ("algo.constraints.collision.target=0.05", "algo.constraints.collision.target: must be "
+                                               "between 0 and the threshold (0.02), got 0.05"),
 ])
 def test_bad_override_fails_clearly(tmp_path, override, expected):
     """One line, exit status 2, nothing written; for a group, the choices that exist."""
@@ -194,6 +196,21 @@ def test_ppo_baseline_weights_follow_the_action_type():
     assert discrete.algo.frozen and discrete.algo.constraints["lane"].initial == 1.0
     assert discrete.algo.constraints["collision"].initial == 4.0
     assert continuous.algo.constraints["collision"].initial == 40.0
+
+
+def test_a_target_below_the_threshold_moves_dual_ascent_not_the_verdict():
+    """target=0.01: an episode mean of 0.015 collisions violates the target, so lambda rises
+    by eta (0.015 - 0.01) = 0.5 x 0.005 = 0.0025; without a target it falls (clipped at 0)."""
+    from crllk.tasks.config import load_task_config
+    from crllk.training.build import build_multipliers
+
+    constraints = load_task_config("obstacle_loop").constraints
+    for overrides, expected in ((["algo.constraints.collision.target=0.01"], 0.0025), ([], 0.0)):
+        config = validate(compose_config(["task=obstacle_loop", *overrides]))
+        multiplier = build_multipliers(config, constraints)["collision"]
+        multiplier.update([0.0, 0.01, 0.02, 0.03])  # mean 0.015
+        assert multiplier.value == pytest.approx(expected)
+        assert config.algo.constraints["collision"].threshold == 0.02
 
 
 @pytest.mark.parametrize("key", ["task_file", "task"])

@@ -137,7 +137,7 @@ def build_multipliers(config: TrainConfig, constraints: Sequence[Constraint]
                               f"the task constrains {name!r} but no multiplier is set for it "
                               f"(set: {', '.join(algo.constraints) or 'none'})")
         c = algo.constraints[name]
-        common = {"threshold": c.threshold, "initial": c.initial, "max_value": c.max_value,
+        common = {"threshold": c.dual_target(), "initial": c.initial, "max_value": c.max_value,
                   "schedule": algo.schedule, "frozen": algo.frozen}
         if algo.multiplier == "pid":
             multipliers[name] = make_multiplier("pid", kp=c.kp, ki=c.step_size, kd=c.kd, **common)

@@ -49,6 +49,10 @@ class ConstraintConfig:
 
     threshold: float = setting(check=non_negative)
     """alpha: the most the constraint's metric may be (in the constraint's unit)."""
+    target: float | None = None
+    """The value dual ascent drives the metric to (None: ``threshold``). A target below alpha
+    leaves a margin for the evaluation's sampling noise: a policy trained to sit at alpha
+    meets it in about half of its evaluations. Verdicts always compare with ``threshold``."""
     initial: float = setting(0.0, check=non_negative)
     """lambda at the start (with ``algo.frozen``: the fixed weight)."""
     step_size: float = setting(0.05, check=positive)
@@ -63,6 +67,13 @@ class ConstraintConfig:
     def problems(self) -> Iterator[tuple[str, str]]:
         if self.max_value < self.initial:
             yield "max_value", (f"must be >= initial ({self.initial}), got {self.max_value}")
+        if self.target is not None and not 0.0 <= self.target <= self.threshold:
+            yield "target", (f"must be between 0 and the threshold ({self.threshold}), got "
+                             f"{self.target}")
+
+    def dual_target(self) -> float:
+        """What the multiplier's dual ascent compares the metric with."""
+        return self.threshold if self.target is None else self.target
 
 
 @dataclass
