@@ -148,6 +148,8 @@ class Physics(dm_mujoco.Physics):
         self._obstacle_geoms = np.array(
             [i for i in range(self.model.ngeom)
              if (self.model.id2name(i, "geom") or "").startswith(C.OBSTACLE_PREFIX)], dtype=int)
+        self._is_obstacle = np.zeros(self.model.ngeom, dtype=bool)
+        self._is_obstacle[self._obstacle_geoms] = True
         self._footprint_geom = self.model.name2id(C.FOOTPRINT_GEOM, "geom")
         self._root_qpos = self.model.jnt_qposadr[self.model.name2id(C.ROOT_JOINT, "joint")]
         self._root_qvel = self.model.jnt_dofadr[self.model.name2id(C.ROOT_JOINT, "joint")]
@@ -186,13 +188,14 @@ class Physics(dm_mujoco.Physics):
 
     def touches_obstacle(self) -> bool:
         """Whether the chassis footprint is in contact with any obstacle."""
-        if self.data.ncon == 0 or len(self._obstacle_geoms) == 0:
+        data = self._mj_data
+        if data.ncon == 0 or len(self._obstacle_geoms) == 0:
             return False
-        contacts = self.data.contact
+        contacts = data.contact
         g1, g2 = contacts.geom1, contacts.geom2
-        mine = (g1 == self._footprint_geom) | (g2 == self._footprint_geom)
-        return bool(np.any(mine & (np.isin(g1, self._obstacle_geoms)
-                                   | np.isin(g2, self._obstacle_geoms))))
+        footprint, obstacle = self._footprint_geom, self._is_obstacle
+        return bool(np.any(((g1 == footprint) & obstacle[g2])
+                           | ((g2 == footprint) & obstacle[g1])))
 
     # ----- commands ---------------------------------------------------------------------
     def set_pose(self, x: float, y: float, yaw: float) -> None:
