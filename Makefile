@@ -1,6 +1,7 @@
 # Two commands set up everything on a fresh machine:
-#   make train  install into .venv and train CRLLK-D from the camera on small_loop (about 25
-#               minutes on 2 cores); the run lands in runs/small_loop/crllk-discrete-pixels-seed0
+#   make train  install into .venv and train CRLLK-D from the camera on small_loop (about 39
+#               minutes on 2 cores, evaluations included); the run lands in
+#               runs/small_loop/crllk-discrete-pixels-seed0
 #   make test   install into .venv and run the test suite
 PYTHON ?= python3.11
 VENV := .venv
