@@ -1,6 +1,6 @@
 # Two commands set up everything on a fresh machine:
-#   make train  install into .venv and train CRLLK-D from the camera on small_loop (about 39
-#               minutes on 2 cores, evaluations included); the run lands in
+#   make train  install into .venv and train CRLLK-D from the camera on small_loop (about 29
+#               minutes on 2 cores, its final evaluation included); the run lands in
 #               runs/small_loop/crllk-discrete-pixels-seed0
 #   make test   install into .venv and run the test suite
 PYTHON ?= python3.11
@@ -49,7 +49,7 @@ viewer-pictures: $(STAMP)
 	$(PY) -m crllk.record --task obstacle_loop --episodes 3 --horizon 150 --seed 1 --out $(VIEWER_RECORDING)
 	$(PY) -m crllk.screenshots $(VIEWER_RECORDING) --out docs/images --prefix viewer_recording --times 9
 	$(PY) -m crllk.screenshots --out docs/images --prefix viewer_live_training --train \
-		task=obstacle_loop obs=state seed=0 total_frames=40960 record_every=10 eval.every=0
+		task=obstacle_loop obs=state seed=0 total_frames=40960 record_every=10 eval.final=false
 
 test: $(STAMP)
 	$(PY) -m pytest -q

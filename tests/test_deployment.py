@@ -37,7 +37,7 @@ HISTORY = ["obs.history=2", "obs.history_stride=3"]
 def exported(request, tmp_path_factory):
     obs, action, *history = request.param.split("-")
     run = run_in_process(tmp_path_factory.mktemp(request.param) / "run", 1,
-                         [f"obs={obs}", f"action={action}", "eval.every=0",
+                         [f"obs={obs}", f"action={action}", "eval.final=false",
                           *(HISTORY if history else [])])
     assert exit_status(lambda: export.main([f"run={run}"])) == 0
     return run, obs, action
@@ -146,7 +146,7 @@ def test_the_pilot_takes_jpeg_bytes_and_arrays(exported):
 @pytest.fixture(scope="module")
 def pixel_policy(tmp_path_factory):
     run = run_in_process(tmp_path_factory.mktemp("pixel-policy") / "run", 1,
-                         ["obs=pixels", "eval.every=0"])
+                         ["obs=pixels", "eval.final=false"])
     assert exit_status(lambda: export.main([f"run={run}"])) == 0
     return run / "policy.onnx"
 

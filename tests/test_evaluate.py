@@ -181,7 +181,7 @@ def test_an_evaluation_under_changed_task_settings_goes_to_its_own_file(tmp_path
     """``overrides.*`` change the run's task for one evaluation (here the deployment path of
     the camera and randomisation), written to ``<name>.json`` beside the nominal
     ``eval.json``, which it leaves alone; the document records the overrides."""
-    run = run_in_process(tmp_path / "pixels", 1, ["obs=pixels", "eval.every=0"])
+    run = run_in_process(tmp_path / "pixels", 1, ["obs=pixels", "eval.final=false"])
     nominal = evaluate_run(run, episodes=2, num_envs=2)
     changed = evaluate_run(run, episodes=2, num_envs=2, name="eval-robot-randomized",
                            overrides={"camera": {"robot_frames": True},

@@ -9,7 +9,7 @@ from tiny_runs import assert_same_runs, read_rows, run_in_process
 from crllk.errors import ConfigError
 
 NUM_ENVS, ROLLOUT = 2, 4
-SMALL = [f"num_envs={NUM_ENVS}", f"rollout_steps={ROLLOUT}", "obs=state", "eval.every=0",
+SMALL = [f"num_envs={NUM_ENVS}", f"rollout_steps={ROLLOUT}", "obs=state", "eval.final=false",
          "ppo.anneal_lr=false"]
 """obs=state, two simulations, four steps per iteration; a constant learning rate, so that runs
 of different lengths share their first iterations."""

@@ -34,7 +34,7 @@ from crllk.training.checkpoints import load_checkpoint
 from crllk.training.compose import compose_config
 
 REPO = Path(__file__).resolve().parents[1]
-STATE = ["obs=state", "eval.every=0"]
+STATE = ["obs=state", "eval.final=false"]
 RAY_RUN_S = 600
 """The longest a tiny run through Ray may take on a loaded machine (s)."""
 

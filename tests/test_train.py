@@ -68,6 +68,17 @@ def test_tiny_run_of_every_variant(tmp_path, algo, action, obs):
     assert (run / "config.yaml").exists()
 
 
+@pytest.mark.parametrize(("every", "final", "iterations"), [
+    (2, True, [2, 3]), (2, False, [2]), (0, True, [3]), (0, False, [])])
+def test_evaluations_are_periodic_and_at_the_end(tmp_path, every, final, iterations):
+    """``eval.every`` iterations apart (0: none), and with ``eval.final`` one at the end."""
+    run = run_in_process(tmp_path / "run", 3, ["obs=state", f"eval.every={every}",
+                                               f"eval.final={str(final).lower()}",
+                                               "eval.episodes=2", "eval.num_envs=2"])
+    rows = read_rows(run / "eval.csv") if (run / "eval.csv").exists() else []
+    assert [int(r["iteration"]) for r in rows] == iterations
+
+
 def test_multiplier_rises_while_the_constraint_is_violated(tmp_path):
     """An untrained policy leaves the road: λ_coll must grow from 0 by dual ascent."""
     run = run_in_process(tmp_path / "run", 3, ["algo.constraints.collision.step_size=0.5",
@@ -342,7 +353,7 @@ def test_a_multirun_trains_every_combination_in_parallel(tmp_path):
         [sys.executable, "-m", "crllk.train", "-m", "seed=0,1",
          "algo.constraints.lane.threshold=0.5,0.75",
          f"run_dir={tmp_path}/s${{seed}}-a${{algo.constraints.lane.threshold}}", "obs=state",
-         "num_envs=2", "rollout_steps=4", "total_frames=8", "progress=false", "eval.every=0"],
+         "num_envs=2", "rollout_steps=4", "total_frames=8", "progress=false", "eval.final=false"],
         cwd=tmp_path, capture_output=True, text=True, timeout=600)
     assert result.returncode == 0, result.stderr[-2000:]
     runs = sorted(p.name for p in tmp_path.iterdir() if (p / "metrics.csv").exists())
@@ -358,7 +369,7 @@ def test_a_multirun_through_submitit_runs_each_job(tmp_path):
     result = subprocess.run(
         [sys.executable, "-m", "crllk.train", "-m", "hydra/launcher=submitit_local", "seed=0,1",
          f"run_dir={tmp_path}/s${{seed}}", "obs=state", "num_envs=2", "rollout_steps=4",
-         "total_frames=8", "progress=false", "eval.every=0"],
+         "total_frames=8", "progress=false", "eval.final=false"],
         cwd=tmp_path, capture_output=True, text=True, timeout=900)
     assert result.returncode == 0, result.stderr[-2000:]
     assert sorted(p.name for p in tmp_path.iterdir() if (p / "metrics.csv").exists()) == [
@@ -386,7 +397,7 @@ def test_a_multirun_through_ray_runs_each_job_on_a_head_bound_to_127_0_0_1(tmp_p
             [sys.executable, "-m", "crllk.train", "-m", "hydra/launcher=ray_local",
              f"hydra.launcher.ray.init.address={address}", "seed=0,1",
              f"run_dir={runs}/s${{seed}}", "obs=state", "num_envs=2", "rollout_steps=4",
-             "total_frames=8", "progress=false", "eval.every=0"],
+             "total_frames=8", "progress=false", "eval.final=false"],
             cwd=tmp_path, env=env, stdout=out, stderr=subprocess.STDOUT)
     listening = set()
     deadline = time.monotonic() + 600

@@ -163,8 +163,12 @@ class TeacherConfig:
 class EvalConfig:
     """The evaluations written to ``eval.csv`` during training."""
 
-    every: int = setting(100, check=non_negative)
-    """Iterations between evaluations, and one at the end (0: never)."""
+    every: int = setting(0, check=non_negative)
+    """Iterations between periodic evaluations, for learning curves in ``eval.csv`` (0: none;
+    from pixels each costs about 2 min of a 28 min run)."""
+    final: bool = True
+    """An evaluation at the end of training: the last row of ``eval.csv``, and the run's
+    ``eval.json`` from ``python -m crllk.train``."""
     episodes: int = setting(100, check=positive)
     """Episodes of the sampled policy each time: the same as ``python -m crllk.evaluate``."""
     num_envs: int = setting(10, check=positive)

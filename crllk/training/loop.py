@@ -7,8 +7,9 @@ One iteration (:func:`learn`, then the logs):
 3. compute GAE advantages for the reward and each cost, and run PPO epochs on the combined
    advantage (A_r − Σλ_i A_ci) / (1 + Σλ_i);
 4. append a row to ``metrics.csv``; every ``checkpoint_every`` iterations (and at the end)
-   write ``checkpoints/last.pt`` atomically; every ``eval.every`` iterations append an
-   evaluation to ``eval.csv`` (the same episodes as ``python -m crllk.evaluate``); every
+   write ``checkpoints/last.pt`` atomically; at the end (``eval.final``) and every
+   ``eval.every`` iterations append an evaluation to ``eval.csv`` (the same episodes as
+   ``python -m crllk.evaluate``); every
    ``record_every`` iterations record one evaluation episode with rerun; with ``live`` send
    the row and the recordings to the run's live view (:mod:`crllk.recording.live`).
 
@@ -137,8 +138,8 @@ def train(config: TrainConfig, on_final_evaluation: FinalEvaluation | None = Non
         bar.update(batch.numel())
         bar.set_postfix_str(progress_text(row, constraints), refresh=False)
 
-        if config.eval.every and (iteration % config.eval.every == 0
-                                  or frames >= config.total_frames):
+        periodic = bool(config.eval.every) and iteration % config.eval.every == 0
+        if periodic or (config.eval.final and frames >= config.total_frames):
             if eval_env is None:
                 eval_env = build_env(config, num_envs=config.eval.num_envs, seed=config.eval.seed)
             row, result = evaluate(config, eval_env, learner, iteration, frames,
