@@ -46,6 +46,25 @@ def test_bench_prints_each_figure_with_its_bound(capsys):
     assert "env, pixels, randomize=default" in printed
 
 
+def test_bench_times_each_part_of_the_randomisation(capsys):
+    """``--randomize-parts``: one ratio per part of randomize=default and one for all of it,
+    each against the same env without randomisation; each part sets only its own fields."""
+    from crllk.bench import cli as bench
+    from crllk.tasks.config import load_task_config
+
+    bench.main(["--steps", "10", "--randomize-parts"])
+    printed = capsys.readouterr().out
+    for part in [*bench.RANDOMIZED_PARTS, "all (default)"]:
+        assert f"env, pixels, randomize: {part} " in printed, part
+    covered = [name for names in bench.RANDOMIZED_PARTS.values() for name in names]
+    preset = bench.PRESETS["default"]
+    set_in_preset = [f for f, v in vars(preset).items() if v not in (None, 0, 0.0)]
+    assert sorted(covered) == sorted(set_in_preset)  # the parts cover the preset, once each
+    lighting = load_task_config("small_loop", {"randomize": bench.randomization_part(
+        "lighting")}).randomize
+    assert lighting.light_tilt == preset.light_tilt and lighting.jpeg_quality is None
+
+
 def test_bench_batched_and_training_figures(capsys, tmp_path):
     """The batched-environment and training figures, and the time to satisfy both constraints
     read from a run's eval.csv, at a tiny budget."""

@@ -1,7 +1,8 @@
 """Throughput benchmarks, each figure next to the bound it is measured against in the same run.
 
     python -m crllk.bench [--task small_loop] [--steps 3000] [--batched] [--training]
-                          [--workers 1 2 [--obs pixels state]] [--runs RUN_DIR ...]
+                          [--randomize-parts] [--workers 1 2 [--obs pixels state]]
+                          [--runs RUN_DIR ...]
 
 Bounds: a state-observation environment step should cost at most twice
 the raw MuJoCo physics of one control step (ratio >= 0.5); a pixel environment step at most
@@ -21,11 +22,12 @@ from __future__ import annotations
 import functools
 from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from crllk.bench.rates import (
     env_rate,
     env_stepper,
+    interleaved_rates,
     paired_rates,
     print_row,
     raw_physics_rate,
@@ -35,6 +37,7 @@ from crllk.bench.rates import (
 from crllk.cli import Parser, fail, positive_int, run
 from crllk.errors import ConfigError
 from crllk.tasks.config import load_task_config
+from crllk.tasks.randomization import PRESETS
 
 if TYPE_CHECKING:
     from crllk.training.config import TrainConfig
@@ -43,6 +46,15 @@ RANDOMIZED = {"randomize": "default"}
 """Task settings of the randomised figures, each measured against the same env without."""
 RANDOMIZED_TARGET = 0.9
 """Domain randomisation may slow pixel steps by at most 10 %."""
+RANDOMIZED_PARTS = {
+    "lighting": ("light_intensity", "light_tilt", "ambient", "headlight"),
+    "colours": ("floor_color", "horizon_color", "object_color"),
+    "camera pose": ("camera_height", "camera_pitch", "camera_fov", "camera_position_noise"),
+    "JPEG compression": ("jpeg_quality",),
+    "sensor noise": ("sensor_noise",),
+    "dynamics": ("max_speed", "yaw_rate", "wheel_distance", "time_constants", "delay", "trim"),
+}
+"""The parts of ``randomize=default`` that ``--randomize-parts`` times one at a time."""
 
 
 def main(argv: Sequence[str] | None = None) -> None:
@@ -65,6 +77,9 @@ def main(argv: Sequence[str] | None = None) -> None:
                              "compare (the trainer's workers setting), e.g. 1 2")
     parser.add_argument("--obs", nargs="+", choices=("pixels", "state"),
                         default=["pixels", "state"], help="observations of the --workers figures")
+    parser.add_argument("--randomize-parts", action="store_true",
+                        help="time each part of randomize=default alone against the pixel env "
+                             "without randomisation (where the randomisation cost goes)")
     parser.add_argument("--runs", nargs="*", type=Path, default=[],
                         help="run directories whose eval.csv gives the time to satisfy both "
                              "constraints")
@@ -90,6 +105,8 @@ def main(argv: Sequence[str] | None = None) -> None:
                                       args.steps, RANDOMIZED)
     print_row("env, pixel observations", pixels, render, 0.6)
     print_row("env, pixels, randomize=default", randomized, pixels, RANDOMIZED_TARGET)
+    if args.randomize_parts:
+        print_randomization_parts(args.task, args.steps)
     if args.batched:
         print_batched_figures(args.task, args.num_envs, args.steps, raw, render)
     if training_configs:
@@ -126,6 +143,30 @@ def training_bench_configs(task: str, overrides: Sequence[str]) -> list[TrainCon
         raise ConfigError("--overrides", "collector", "--training times local collection; time "
                           "collector=ray with --workers")
     return configs
+
+
+def randomization_part(part: str) -> dict[str, Any]:
+    """The ``randomize`` setting of one part of the ``default`` preset (:data:`RANDOMIZED_PARTS`),
+    the other parts off."""
+    preset = PRESETS["default"]
+    return {name: list(value) if isinstance(value, tuple) else value
+            for name in RANDOMIZED_PARTS[part] for value in [getattr(preset, name)]}
+
+
+def print_randomization_parts(task: str, steps: int) -> None:
+    """The pixel env with each part of ``randomize=default`` alone, and with all of it, each
+    against the env without randomisation, all timed in turns in one run."""
+    settings = {"none": None, **{part: {"randomize": randomization_part(part)}
+                                 for part in RANDOMIZED_PARTS}, "all (default)": RANDOMIZED}
+    steppers = {name: env_stepper(task, "pixels", overrides=overrides)
+                for name, overrides in settings.items()}
+    rates = dict(zip(steppers, interleaved_rates([s[0] for s in steppers.values()], steps),
+                     strict=True))
+    for _, close in steppers.values():
+        close()
+    for name, rate in rates.items():
+        if name != "none":
+            print_row(f"env, pixels, randomize: {name}", rate, rates["none"])
 
 
 def print_batched_figures(task: str, num_envs: int, steps: int, raw: float,
