@@ -12,6 +12,8 @@ export MUJOCO_GL ?= egl
 export PIP_DISABLE_PIP_VERSION_CHECK := 1
 
 TRAIN_ARGS ?=
+# pytest workers for `make test` (pytest-xdist; `auto` is one per core)
+TEST_JOBS ?= auto
 
 .PHONY: install install-cluster train demo test test-slow lint pictures viewer-pictures clean
 
@@ -52,7 +54,7 @@ viewer-pictures: $(STAMP)
 		task=obstacle_loop obs=state seed=0 total_frames=40960 record_every=10 eval.final=false
 
 test: $(STAMP)
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q -n $(TEST_JOBS) --dist loadgroup
 
 test-slow: $(CLUSTER_STAMP)
 	$(PY) -m pytest -q -m slow

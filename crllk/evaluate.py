@@ -30,12 +30,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import torch
-
 from crllk.cli import run
 from crllk.errors import ConfigError
-from crllk.evaluation.report import aggregate, format_aggregate, format_summary
-from crllk.evaluation.runs import evaluate_follower, evaluate_run, record_run
 from crllk.files import atomic_write_text, write_problem
 from crllk.settings import (
     at_least_one,
@@ -107,8 +103,6 @@ class EvaluateConfig:
             yield "out", problem
 
 
-# ----- one evaluation ----------------------------------------------------------------------
-# ----- several runs ------------------------------------------------------------------------
 # ----- command line ------------------------------------------------------------------------
 def parse(argv: Sequence[str]) -> EvaluateConfig:
     """``key=value`` arguments checked against :class:`EvaluateConfig`."""
@@ -122,6 +116,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 0
     try:
         config = parse(argv)
+        # torch and the simulator only once the arguments are known to be good: bad input is
+        # reported in a second or two
+        import torch
+
+        from crllk.evaluation.report import aggregate, format_aggregate, format_summary
+        from crllk.evaluation.runs import evaluate_follower, evaluate_run, record_run
+
         torch.set_num_threads(config.threads)
         documents = []
         for run_dir in config.run_dirs():

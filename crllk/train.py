@@ -18,7 +18,6 @@ from omegaconf import DictConfig, OmegaConf
 import crllk  # noqa: F401  (chooses the headless GL backend before torchrl imports mujoco)
 from crllk.cli import exit_status
 from crllk.errors import ConfigError
-from crllk.evaluation.runs import write_final_evaluation
 from crllk.training.compose import (
     compose_config,
     launcher_problems,
@@ -26,7 +25,6 @@ from crllk.training.compose import (
     task_paths_as_task_file,
 )
 from crllk.training.config import TrainConfig, upgrade, validate
-from crllk.training.loop import train
 
 RESUME_KEEPS = ("total_frames", "progress", "threads", "workers", "collector", "ray_address",
                 "checkpoint_every", "record_every", "viewer", "live", "live_port")
@@ -53,10 +51,18 @@ register()
 
 @hydra.main(version_base="1.3", config_path="conf", config_name="train")
 def main(cfg: DictConfig) -> None:
-    status = exit_status(lambda: train(resolve_config(cfg),
-                                       on_final_evaluation=write_final_evaluation))
+    status = exit_status(lambda: train_from(resolve_config(cfg)))
     if status:
         raise SystemExit(status)
+
+
+def train_from(config: TrainConfig) -> None:
+    """Trains a run with checked settings. The learner (torch, TorchRL) is imported only here,
+    once the settings are known to be good, so bad input is reported in a second or two."""
+    from crllk.evaluation.runs import write_final_evaluation
+    from crllk.training.loop import train
+
+    train(config, on_final_evaluation=write_final_evaluation)
 
 
 def check_overrides(argv: list[str]) -> None:

@@ -30,3 +30,13 @@ def tiny_experiments(tmp_path_factory):
         capture_output=True, text=True, timeout=600)
     assert completed.returncode == 0, completed.stdout[-3000:] + completed.stderr[-3000:]
     return runs / "pixels", results / "pixels", completed.stdout
+
+
+@pytest.hookimpl(tryfirst=True)  # before pytest-xdist reads the groups
+def pytest_collection_modifyitems(items):
+    """Under pytest-xdist (``make test`` runs ``-n auto --dist loadgroup``), the tests that read
+    :func:`tiny_experiments` share one worker, so its runs are trained once, not once per
+    worker."""
+    for item in items:
+        if "tiny_experiments" in getattr(item, "fixturenames", ()):
+            item.add_marker(pytest.mark.xdist_group("tiny_experiments"))

@@ -61,6 +61,9 @@ from crllk.files import atomic_write_text, write_problem
 from crllk.training.compose import compose_config
 from crllk.training.config import validate
 
+TABULATION_ONLY_S = 60.0
+"""Wall time (s) below which an invocation trained nothing: it only read finished runs."""
+
 
 # ----- tables -------------------------------------------------------------------------------
 def agent_results(outcome: Outcome, task: str, agents: Sequence[str],
@@ -202,8 +205,7 @@ def table_markdown(document: dict[str, Any]) -> str:
             "; the rows marked *deployed policy (mode)* play the same episodes with the most "
             "probable action, the policy `crllk.export` writes for the robot." if with_mode
             else "."),
-        f"- Command: `{settings['command']}` ({document['wall_s'] / 60:.1f} min wall for the "
-        "invocation that finished it; finished runs are reused).",
+        f"- Command: `{settings['command']}` ({invocation_note(document['wall_s'])}).",
         f"- Machine: {settings['machine']}.", "",
         header, rule, *rows, "",
     ]
@@ -287,6 +289,15 @@ def figure1(settings: Settings) -> list[Path]:
     by_threshold = {t: [s.directory(settings.runs_root) for s in specs if s.lane_threshold == t]
                     for t in FIGURE_THRESHOLDS}
     return figure1_pictures(by_threshold, settings.results, _settings_dict(settings))
+
+
+def invocation_note(wall_s: float) -> str:
+    """How long the command that wrote a table ran: runs it finished are reused, so a table
+    written from finished runs took no training time."""
+    if wall_s < TABULATION_ONLY_S:
+        return "every run was already finished: this invocation only tabulated them"
+    return f"{wall_s / 60:.1f} min wall for the invocation that finished it; finished runs " \
+        "are reused"
 
 
 def sweep_specs(settings: Settings) -> list[RunSpec]:
@@ -377,8 +388,7 @@ def sweep_markdown(document: dict[str, Any]) -> str:
              f"- Observation: `{settings['obs']}`; budget {settings['frames']:,} frames per run; "
              f"{settings['episodes']} evaluation episodes per run of the sampled policy, spawn "
              f"and sampling seed {settings['eval_seed']}.",
-             f"- Command: `{settings['command']}` ({document['wall_s'] / 60:.1f} min wall for "
-             "the invocation that finished it).",
+             f"- Command: `{settings['command']}` ({invocation_note(document['wall_s'])}).",
              f"- Machine: {settings['machine']}.", ""]
     for task, entry in document["maps"].items():
         lines += [f"## {task}", "", "| agent | λ_lane | λ_coll | J_clane (dm) | J_coll | J_R (m) "

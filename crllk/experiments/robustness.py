@@ -71,7 +71,8 @@ def robustness_document(documents: Mapping[tuple[RunSpec, str], dict], settings:
                               "satisfied": [bool(d["summary"]["satisfied"]) for d in docs]})
     return {"title": "Robustness: CRLLK-D from pixels under held-out conditions",
             "thresholds": THRESHOLDS, "conditions": {k: dict(v) for k, v in table.items()},
-            "settings": {"episodes": settings.episodes, "seeds": list(settings.seeds),
+            "settings": {"obs": settings.obs, "episodes": settings.episodes,
+                         "seeds": list(settings.seeds),
                          "frames": settings.frames, "eval_seed": settings.eval_seed,
                          "command": settings.command},
             "cells": cells}

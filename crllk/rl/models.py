@@ -19,7 +19,6 @@ are scaled to [0, 1] inside the encoder.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
 
 import torch
 from tensordict.nn import TensorDictModule
@@ -28,38 +27,10 @@ from torch.distributions import Categorical
 from torchrl.data import TensorSpec
 from torchrl.modules import ProbabilisticActor, TanhNormal, ValueOperator
 
-from crllk.settings import one_of, positive, setting
+from crllk.rl.model_config import ModelConfig
 
 PIXEL_SCALE = 1.0 / 255.0  # uint8 camera value -> [0, 1]
 ENCODERS = ("fast", "original", "mlp")
-
-
-@dataclass
-class ModelConfig:
-    """Sizes of the networks.
-
-    Attributes:
-        encoder: ``"fast"`` or ``"original"`` for pixels; state always uses ``"mlp"``.
-        hidden: width of the hidden layers of the state MLP and of the heads.
-        feature_dim: width of the pixel encoder's output layer.
-        initial_log_std: log standard deviation of the continuous actor's first actions
-            (before the tanh squashing).
-        shared_critic: one encoder with a value head for the reward and each cost, instead
-            of one network per critic.
-        critic_input: what the critics read: ``"observation"`` (the policy's input) or
-            ``"state"`` (the lane-relative features, also with pixel policies: an asymmetric
-            actor-critic; critics only shape training, so the policy still drives from pixels).
-        policy_commands: the policy also reads its own wheel commands of the last steps (those
-            still in flight through the motor delay), which a robot knows without sensing.
-    """
-
-    encoder: str = setting("fast", check=one_of("fast", "original"))
-    hidden: int = setting(64, check=positive)
-    feature_dim: int = setting(256, check=positive)
-    initial_log_std: float = -0.5
-    shared_critic: bool = False
-    critic_input: str = setting("observation", check=one_of("observation", "state"))
-    policy_commands: bool = False
 
 
 class PixelScale(nn.Module):

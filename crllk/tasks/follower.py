@@ -19,11 +19,9 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import torch
-from tensordict import TensorDictBase
 
 from crllk.maps import DuckietownMap, LanePose
 from crllk.maps.obstacles import ObstacleIndex
@@ -31,6 +29,9 @@ from crllk.sim.constants import FOOTPRINT_WIDTH
 from crllk.sim.motor import MotorConfig
 from crllk.sim.physics import Physics
 from crllk.tasks.actions import duty_to_action
+
+if TYPE_CHECKING:
+    from tensordict import TensorDictBase
 
 
 @dataclass(frozen=True)
@@ -140,6 +141,8 @@ class FollowerPolicy:
                                      gains=FollowerGains(avoid_margin=margin))
 
     def __call__(self, td: TensorDictBase) -> TensorDictBase:
+        import torch  # the follower's geometry needs no torch; only this batched policy does
+
         duties = [self.follower.duty(physics) for physics in self.env.physics]
         if self.action_type == "duty":
             td.set("action", torch.as_tensor(np.stack(duties), dtype=torch.float32))

@@ -18,7 +18,7 @@ from typing import Any
 from hydra.core.config_store import ConfigStore
 from omegaconf import DictConfig, OmegaConf
 
-from crllk.rl.models import ModelConfig
+from crllk.rl.model_config import ModelConfig
 from crllk.settings import (
     host_port,
     non_negative,

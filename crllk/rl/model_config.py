@@ -1,0 +1,39 @@
+"""The sizes and shape of the policy and value networks: the ``model`` settings of a run,
+read without importing torch (:mod:`crllk.rl.models` builds the networks from them)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from crllk.settings import one_of, positive, setting
+
+
+@dataclass
+class ModelConfig:
+    """Sizes of the networks.
+
+    Attributes:
+        encoder: ``"fast"`` or ``"original"`` for pixels; state always uses ``"mlp"``.
+        hidden: width of the hidden layers of the state MLP and of the heads.
+        feature_dim: width of the pixel encoder's output layer.
+        initial_log_std: log standard deviation of the continuous actor's first actions
+            (before the tanh squashing).
+        shared_critic: one encoder with a value head for the reward and each cost, instead
+            of one network per critic.
+        critic_input: what the critics read: ``"observation"`` (the policy's input) or
+            ``"state"`` (the lane-relative features, also with pixel policies: an asymmetric
+            actor-critic; critics only shape training, so the policy still drives from pixels).
+        policy_commands: the policy also reads its own wheel commands of the last steps (those
+            still in flight through the motor delay), which a robot knows without sensing.
+    """
+
+    encoder: str = setting("fast", check=one_of("fast", "original"))
+    hidden: int = setting(64, check=positive)
+    feature_dim: int = setting(256, check=positive)
+    initial_log_std: float = -0.5
+    shared_critic: bool = False
+    critic_input: str = setting("observation", check=one_of("observation", "state"))
+    policy_commands: bool = False
+
+
+__all__ = ["ModelConfig"]
