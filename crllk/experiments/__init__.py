@@ -28,6 +28,7 @@ from __future__ import annotations
 import json
 import os
 import platform
+import shlex
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -480,7 +481,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     for name in ("frames", "episodes", "jobs"):
         if getattr(args, name) < 1:
             parser.error(f"--{name} must be at least 1, got {getattr(args, name)}")
-    command = "python -m crllk.experiments " + " ".join(sys.argv[1:] if argv is None else argv)
+    command = "python -m crllk.experiments " + shlex.join(sys.argv[1:] if argv is None else argv)
     settings = Settings(frames=args.frames, seeds=tuple(args.seeds), episodes=args.episodes,
                         obs=args.obs, jobs=args.jobs, runs_root=args.runs_root / args.obs,
                         results=args.results / args.obs, command=command,
