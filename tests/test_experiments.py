@@ -59,15 +59,24 @@ def test_map_tables_and_figure1_are_written(tiny_experiments):
     assert (runs / "small_loop" / "CRLLK-D-a0.75-seed0" / "eval.json").exists()
 
 
-def test_a_second_invocation_reuses_finished_runs(tiny_experiments):
+def test_a_second_invocation_reuses_finished_runs(tiny_experiments, tmp_path):
+    """The table says what its invocation did: the first trained its four runs, the second
+    trained and evaluated nothing."""
     runs, results, _ = tiny_experiments
+    first = json.loads((results / "table1.json").read_text())
+    assert (first["runs_trained"], first["runs_total"]) == (4, 4)
     completed = subprocess.run(
         [sys.executable, "-m", "crllk.experiments", "table1", *TINY_EXPERIMENT, "--runs-root",
-         str(runs.parent), "--results", str(results.parent)], cwd=REPO, capture_output=True,
+         str(runs.parent), "--results", str(tmp_path)], cwd=REPO, capture_output=True,
         text=True, timeout=300)
     assert completed.returncode == 0, completed.stderr
     assert "training 0 of 4 runs" in completed.stdout
     assert "evaluating 0 of 4 runs" in completed.stdout
+    second = json.loads((tmp_path / "pixels" / "table1.json").read_text())
+    assert (second["runs_trained"], second["evaluations_made"]) == (0, 0)
+    assert second["agents"] == first["agents"]
+    assert "which trained 0 of 4 runs and made 0 evaluations" in \
+        (tmp_path / "pixels" / "table1.md").read_text()
 
 
 def test_agents_choose_the_columns(tiny_experiments, tmp_path):

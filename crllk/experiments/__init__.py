@@ -62,9 +62,6 @@ from crllk.files import atomic_write_text, write_problem
 from crllk.training.compose import compose_config
 from crllk.training.config import validate
 
-TABULATION_ONLY_S = 60.0
-"""Wall time (s) below which an invocation trained nothing: it only read finished runs."""
-
 
 # ----- tables -------------------------------------------------------------------------------
 def agent_results(outcome: Outcome, task: str, agents: Sequence[str],
@@ -206,7 +203,7 @@ def table_markdown(document: dict[str, Any]) -> str:
             "; the rows marked *deployed policy (mode)* play the same episodes with the most "
             "probable action, the policy `crllk.export` writes for the robot." if with_mode
             else "."),
-        f"- Command: `{settings['command']}` ({invocation_note(document['wall_s'])}).",
+        f"- Command: `{settings['command']}` ({invocation_note(document)}).",
         f"- Machine: {settings['machine']}.", "",
         header, rule, *rows, "",
     ]
@@ -234,7 +231,7 @@ def write_table(name: str, title: str, task: str, agents: Sequence[str], outcome
     follower = evaluate_follower(task, episodes=settings.episodes, seed=settings.eval_seed,
                                  thresholds=dict(THRESHOLDS))
     document = {"title": title, "task": task, "thresholds": THRESHOLDS,
-                "settings": _settings_dict(settings), "wall_s": outcome.wall_s,
+                "settings": _settings_dict(settings), **invocation(outcome),
                 "agents": agent_results(outcome, task, agents),
                 "follower": follower["summary"], "paper": paper,
                 "pairs": [list(p) for p in pairs],
@@ -292,13 +289,23 @@ def figure1(settings: Settings) -> list[Path]:
     return figure1_pictures(by_threshold, settings.results, _settings_dict(settings))
 
 
-def invocation_note(wall_s: float) -> str:
-    """How long the command that wrote a table ran: runs it finished are reused, so a table
-    written from finished runs took no training time."""
-    if wall_s < TABULATION_ONLY_S:
-        return "every run was already finished: this invocation only tabulated them"
-    return f"{wall_s / 60:.1f} min wall for the invocation that finished it; finished runs " \
-        "are reused"
+def invocation(outcome: Outcome) -> dict[str, Any]:
+    """What the invocation did, for its document: wall time (s), runs, and how many of them
+    it trained and evaluated."""
+    return {"wall_s": outcome.wall_s, "runs_total": len(outcome.documents),
+            "runs_trained": outcome.trained, "evaluations_made": outcome.evaluated}
+
+
+def invocation_note(document: dict[str, Any]) -> str:
+    """What the command that wrote a table did: how long it ran and, where the document
+    records it, how many runs it trained and evaluated (finished runs are reused, so a table
+    written from finished runs took no training time)."""
+    note = f"{document['wall_s'] / 60:.1f} min wall for the invocation that wrote it"
+    if "runs_trained" not in document:
+        return note + "; finished runs are reused"
+    return (f"{note}, which trained {document['runs_trained']} of "
+            f"{document['runs_total']} runs and made {document['evaluations_made']} "
+            "evaluations; finished runs are reused")
 
 
 def sweep_specs(settings: Settings) -> list[RunSpec]:
@@ -366,7 +373,7 @@ def sweep_document(outcome: Outcome, settings: Settings) -> dict[str, Any]:
     return {"title": f"Fixed-weight PPO-D against CRLLK-D ({settings.obs})",
             "thresholds": THRESHOLDS, "lane_weights": list(settings.lane_weights),
             "collision_weights": list(settings.collision_weights),
-            "settings": _settings_dict(settings), "wall_s": outcome.wall_s, "maps": maps}
+            "settings": _settings_dict(settings), **invocation(outcome), "maps": maps}
 
 
 def _group_by_weights(outcome: Outcome, task: str) -> list[list[RunSpec]]:
@@ -389,7 +396,7 @@ def sweep_markdown(document: dict[str, Any]) -> str:
              f"- Observation: `{settings['obs']}`; budget {settings['frames']:,} frames per run; "
              f"{settings['episodes']} evaluation episodes per run of the sampled policy, spawn "
              f"and sampling seed {settings['eval_seed']}.",
-             f"- Command: `{settings['command']}` ({invocation_note(document['wall_s'])}).",
+             f"- Command: `{settings['command']}` ({invocation_note(document)}).",
              f"- Machine: {settings['machine']}.", ""]
     for task, entry in document["maps"].items():
         lines += [f"## {task}", "", "| agent | λ_lane | λ_coll | J_clane (dm) | J_coll | J_R (m) "

@@ -108,6 +108,10 @@ class Outcome:
     modes: dict[RunSpec, dict[str, Any]] = field(default_factory=dict)
     """The evaluations of the deployed policy (:data:`MODE_EVALUATION`), of the runs that
     have one."""
+    trained: int = 0
+    """How many of the runs this invocation trained (the others were finished before it)."""
+    evaluated: int = 0
+    """How many evaluations (sampled and mode) this invocation made (the others were reused)."""
 
 
 # ----- running ------------------------------------------------------------------------------
@@ -248,7 +252,8 @@ def train_and_evaluate(specs: Sequence[RunSpec], settings: Settings,
     documents = {s: read_eval_json(s.directory(root)) for s in specs}
     mode_documents = {s: json.loads((s.directory(root) / f"{MODE_EVALUATION}.json").read_text())
                       for s in specs if _mode_is_current(s.directory(root), settings)}
-    return Outcome(documents, time.perf_counter() - started, mode_documents)
+    return Outcome(documents, time.perf_counter() - started, mode_documents,
+                   trained=len(to_train), evaluated=len(to_evaluate) + len(modes))
 
 
 def _mode_is_current(run_dir: Path, settings: Settings) -> bool:
