@@ -54,7 +54,7 @@ viewer-pictures: $(STAMP)
 		task=obstacle_loop obs=state seed=0 total_frames=40960 record_every=10 eval.final=false
 
 test: $(STAMP)
-	$(PY) -m pytest -q -n $(TEST_JOBS) --dist loadgroup
+	$(PY) -m pytest -q -n $(TEST_JOBS)
 
 test-slow: $(CLUSTER_STAMP)
 	$(PY) -m pytest -q -m slow

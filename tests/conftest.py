@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from filelock import FileLock
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 os.environ.setdefault("PYOPENGL_PLATFORM", os.environ["MUJOCO_GL"])
@@ -21,22 +22,25 @@ TINY_EXPERIMENT = ["--frames", "16", "--seeds", "0", "--episodes", "2", "--set",
 
 @pytest.fixture(scope="session")
 def tiny_experiments(tmp_path_factory):
-    """Runs ``python -m crllk.experiments all`` at the tiny budget; returns (runs, results)."""
-    root = tmp_path_factory.mktemp("experiments")
-    runs, results = root / "runs", root / "results"
-    completed = subprocess.run(
-        [sys.executable, "-m", "crllk.experiments", "all", *TINY_EXPERIMENT, "--runs-root",
-         str(runs), "--results", str(results)], cwd=Path(__file__).resolve().parents[1],
-        capture_output=True, text=True, timeout=600)
-    assert completed.returncode == 0, completed.stdout[-3000:] + completed.stderr[-3000:]
-    return runs / "pixels", results / "pixels", completed.stdout
+    """Runs ``python -m crllk.experiments all`` at the tiny budget, once per test session;
+    returns (runs, results, its stdout).
 
-
-@pytest.hookimpl(tryfirst=True)  # before pytest-xdist reads the groups
-def pytest_collection_modifyitems(items):
-    """Under pytest-xdist (``make test`` runs ``-n auto --dist loadgroup``), the tests that read
-    :func:`tiny_experiments` share one worker, so its runs are trained once, not once per
-    worker."""
-    for item in items:
-        if "tiny_experiments" in getattr(item, "fixturenames", ()):
-            item.add_marker(pytest.mark.xdist_group("tiny_experiments"))
+    Under pytest-xdist (``make test`` runs one worker per core) every worker has its own session
+    fixtures, so the first worker to ask trains the runs in the directory the workers share, under
+    a file lock, and the others wait for it and read them."""
+    shared = tmp_path_factory.getbasetemp()
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        shared = shared.parent  # this session's directory, above the workers' own
+    root = shared / "experiments"
+    runs, results, stdout = root / "runs", root / "results", root / "stdout.txt"
+    with FileLock(f"{root}.lock"):
+        if not stdout.exists():
+            completed = subprocess.run(
+                [sys.executable, "-m", "crllk.experiments", "all", *TINY_EXPERIMENT,
+                 "--runs-root", str(runs), "--results", str(results)],
+                cwd=Path(__file__).resolve().parents[1], capture_output=True, text=True,
+                timeout=600)
+            assert completed.returncode == 0, \
+                completed.stdout[-3000:] + completed.stderr[-3000:]
+            stdout.write_text(completed.stdout)
+    return runs / "pixels", results / "pixels", stdout.read_text()
