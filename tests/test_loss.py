@@ -392,6 +392,14 @@ def test_imitation_term_worked_example():
     assert loss(td)["loss_imitation"].item() == pytest.approx(expected.item(), rel=1e-6)
     with pytest.raises(ValueError, match="imitation_coeff"):
         loss.set_imitation_coeff(-1.0)
+    # the same policy's entropy, −Σ p log p = 0.9003 nats, weighted by the c_H that was set
+    probabilities = torch.tensor([1 / 8, 2 / 8, 5 / 8])
+    entropy = -(probabilities * probabilities.log()).sum().item()
+    assert entropy == pytest.approx(0.9003, abs=1e-4)
+    loss.set_entropy_coeff(0.004)
+    assert loss(td)["loss_entropy"].item() == pytest.approx(-0.004 * entropy, rel=1e-6)
+    with pytest.raises(ValueError, match="entropy_coeff"):
+        loss.set_entropy_coeff(float("nan"))
 
 
 def test_continuous_imitation_trains_the_mean_only():

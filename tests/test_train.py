@@ -287,6 +287,21 @@ def test_learning_rate_schedule():
         validate(compose_config(["ppo.lr_final_fraction=1.5"]))
 
 
+def test_entropy_bonus_schedule():
+    """ppo.entropy_coeff 0.02 falling over 1000 frames to a quarter of it; constant by default;
+    a final fraction outside [0, 1] is refused."""
+    from crllk.training.schedules import entropy_coeff
+
+    config = validate(compose_config(["ppo.entropy_coeff=0.02", "total_frames=1000",
+                                      "ppo.entropy_final_fraction=0.25"]))
+    assert [entropy_coeff(config, f) for f in (0, 500, 1000, 2000)] == pytest.approx(
+        [0.02, 0.0125, 0.005, 0.005])
+    constant = validate(compose_config(["ppo.entropy_coeff=0.02", "total_frames=1000"]))
+    assert entropy_coeff(constant, 900) == pytest.approx(0.02)
+    with pytest.raises(ConfigError, match=r"ppo\.entropy_final_fraction"):
+        validate(compose_config(["ppo.entropy_final_fraction=-0.1"]))
+
+
 def test_teacher_and_encounters_reach_the_training_run(tmp_path):
     """On obstacle_loop with every training episode an encounter, metrics.csv reports the
     encounter episodes apart (J_* stay empty: no episode of the task's own spawns), the

@@ -280,6 +280,12 @@ edge of the box (atanh of nearly ±1) would otherwise inflate the policy's noise
             out[f"explained_variance_{name}"] = explained
         return TensorDict(out, batch_size=[])
 
+    def set_entropy_coeff(self, value: float) -> None:
+        """Sets c_H, the weight of the entropy bonus."""
+        if not (value >= 0.0 and math.isfinite(value)):
+            raise ValueError(f"entropy_coeff must be finite and >= 0, got {value}")
+        self.entropy_coeff.fill_(value)
+
     def set_imitation_coeff(self, value: float) -> None:
         """Sets c_I, the weight of the imitation term (0 switches it off)."""
         if not (value >= 0.0 and math.isfinite(value)):

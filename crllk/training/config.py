@@ -138,6 +138,10 @@ class PPOConfig:
     max_grad_norm: float = setting(1.0, check=positive)
     """Gradient-norm clip."""
     entropy_coeff: float = setting(0.01, check=non_negative)
+    """c_H, the weight of the entropy bonus."""
+    entropy_final_fraction: float = setting(1.0, check=unit_interval)
+    """The entropy bonus falls linearly over ``total_frames`` to ``entropy_coeff`` x this
+    (1: constant), so that the sampled policy can sharpen toward its mode."""
     critic_coeff: float = setting(0.5, check=non_negative)
     normalize_advantage: bool = True
     """Standardise the combined advantage over each minibatch."""

@@ -62,7 +62,7 @@ from crllk.training.logs import (
     progress_text,
 )
 from crllk.training.run_dir import SOURCE_RUN, lock_run_dir
-from crllk.training.schedules import imitation_coeff, learning_rate
+from crllk.training.schedules import entropy_coeff, imitation_coeff, learning_rate
 from crllk.training.updates import ppo_update, shape_signals, update_multipliers
 
 if TYPE_CHECKING:
@@ -186,6 +186,7 @@ def learn(config: TrainConfig, env: TrainingEnv, learner: Learner,
     update_multipliers(multipliers, finished)
     learner.loss.set_multipliers({name: m.value for name, m in multipliers.items()})
     learner.loss.set_imitation_coeff(imitation_coeff(config, frames))
+    learner.loss.set_entropy_coeff(entropy_coeff(config, frames))
     for group in learner.optimizer.param_groups:
         group["lr"] = learning_rate(config, frames)
     env.teacher_active = imitation_coeff(config, frames + batch.numel()) > 0

@@ -1,4 +1,5 @@
-"""Settings that change over a run: the imitation weight and the learning rate."""
+"""Settings that change over a run: the imitation weight, the learning rate and the entropy
+bonus."""
 
 from __future__ import annotations
 
@@ -24,3 +25,11 @@ def learning_rate(config: TrainConfig, frames: int) -> float:
         return ppo.lr
     fraction = min(frames / config.total_frames, 1.0)
     return ppo.lr * (1.0 - fraction * (1.0 - ppo.lr_final_fraction))
+
+
+def entropy_coeff(config: TrainConfig, frames: int) -> float:
+    """Weight of the entropy bonus after ``frames``: ``ppo.entropy_coeff`` falling linearly to
+    ``ppo.entropy_coeff × ppo.entropy_final_fraction`` at ``total_frames``."""
+    ppo = config.ppo
+    fraction = min(frames / config.total_frames, 1.0)
+    return ppo.entropy_coeff * (1.0 - fraction * (1.0 - ppo.entropy_final_fraction))
