@@ -96,17 +96,12 @@ def test_agents_choose_the_columns(tiny_experiments, tmp_path):
     assert rejected.returncode == 2 and "invalid choice: 'SAC'" in rejected.stderr
 
 
-def test_the_trainer_s_final_evaluation_is_not_played_again(tmp_path):
-    """A run whose final evaluation used crllk.evaluate's settings (episodes, seed and its ten
-    simulations) has its eval.json from the trainer: the experiment evaluates only its mode."""
-    completed = subprocess.run(
-        [sys.executable, "-m", "crllk.experiments", "table1", *TINY_EXPERIMENT,
-         "eval.num_envs=10", "--agents", "CRLLK-D", "--runs-root", str(tmp_path / "runs"),
-         "--results", str(tmp_path / "results")], cwd=REPO, capture_output=True, text=True,
-        timeout=300)
-    assert completed.returncode == 0, completed.stdout[-2000:] + completed.stderr[-2000:]
-    assert "evaluating 0 of 1 runs, and the deployed policy (mode) of 1" in completed.stdout
-    run = tmp_path / "runs" / "pixels" / "small_loop" / "CRLLK-D-a0.5-seed0"
+def test_the_trainer_s_final_evaluation_is_not_played_again(tiny_experiments):
+    """The runs' final evaluation used crllk.evaluate's settings (episodes, seed and its ten
+    simulations): the experiment kept the trainer's eval.json and evaluated only the mode."""
+    runs, _, stdout = tiny_experiments
+    assert "evaluating 0 of 4 runs, and the deployed policy (mode) of 4" in stdout
+    run = runs / "small_loop" / "CRLLK-D-a0.5-seed0"
     assert read_eval_json(run)["evaluation"] == {"episodes": 2, "seed": 1_000_000,
                                                  "num_envs": 10, "deterministic": False}
 
@@ -279,6 +274,6 @@ def test_a_table_from_a_sweep_run_by_hand(tmp_path):
          "CRLLK-D", "PPO-D", "--runs-root", str(runs), "--results", str(tmp_path / "results")],
         cwd=REPO, capture_output=True, text=True, timeout=600)
     assert table.returncode == 0, table.stdout[-2000:] + table.stderr[-2000:]
-    assert "training 0 of 2 runs" in table.stdout and "evaluating 2 of 2 runs" in table.stdout
+    assert "training 0 of 2 runs" in table.stdout and "evaluating 0 of 2 runs" in table.stdout
     document = json.loads((tmp_path / "results" / "pixels" / "table1.json").read_text())
     assert list(document["agents"]) == ["CRLLK-D", "PPO-D"]
