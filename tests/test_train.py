@@ -118,11 +118,12 @@ def test_a_constraint_without_a_multiplier_fails_clearly(tmp_path):
                                              "task.constraints=[lane,collision,crossing]"])
 
 
-@pytest.mark.parametrize("randomize", ["none", "default"])
+@pytest.mark.parametrize("randomize", [pytest.param("none", marks=pytest.mark.slow), "default"])
 def test_killed_run_resumes_exactly(tmp_path, randomize):
     """SIGKILL a real ``python -m crllk.train`` after a checkpoint, resume it, and compare its
-    final checkpoint with an uninterrupted run of the same length (also with per-episode
-    domain randomisation)."""
+    final checkpoint with an uninterrupted run of the same length. The default run kills one
+    with per-episode domain randomisation, which restores everything the plain run does and the
+    randomisation's draws too; the plain run is among the slow tests."""
     killed = tmp_path / "killed"
     checkpoint = killed / "checkpoints" / "last.pt"
     # The killed run is started long and resumed short; a falling learning rate follows
