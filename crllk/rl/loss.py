@@ -282,15 +282,11 @@ edge of the box (atanh of nearly ±1) would otherwise inflate the policy's noise
 
     def set_entropy_coeff(self, value: float) -> None:
         """Sets c_H, the weight of the entropy bonus."""
-        if not (value >= 0.0 and math.isfinite(value)):
-            raise ValueError(f"entropy_coeff must be finite and >= 0, got {value}")
-        self.entropy_coeff.fill_(value)
+        self.entropy_coeff.fill_(_non_negative("entropy_coeff", value))
 
     def set_imitation_coeff(self, value: float) -> None:
         """Sets c_I, the weight of the imitation term (0 switches it off)."""
-        if not (value >= 0.0 and math.isfinite(value)):
-            raise ValueError(f"imitation_coeff must be finite and >= 0, got {value}")
-        self.imitation_coeff.fill_(value)
+        self.imitation_coeff.fill_(_non_negative("imitation_coeff", value))
 
     def _imitation_loss(self, td: TensorDictBase, dist: Distribution) -> torch.Tensor:
         """−c_I · mean(log π_θ(a_teacher|s)); 0 when c_I is 0. Continuous teacher actions are
@@ -379,6 +375,13 @@ def _column(value: torch.Tensor, batch_shape: torch.Size) -> torch.Tensor:
         return value
     expected = f"{[*batch_shape]} or {[*batch_shape, 1]}"
     raise ValueError(f"expected an entry of shape {expected}, got {[*value.shape]}")
+
+
+def _non_negative(name: str, value: float) -> float:
+    """``value`` if it is finite and >= 0; a ValueError naming ``name`` otherwise."""
+    if not (value >= 0.0 and math.isfinite(value)):
+        raise ValueError(f"{name} must be finite and >= 0, got {value}")
+    return value
 
 
 def _check_cost_names(names: tuple[str, ...]) -> tuple[str, ...]:

@@ -7,14 +7,19 @@ import crllk  # noqa: F401  (chooses the headless GL backend before torchrl impo
 from crllk.training.config import TrainConfig
 
 
+def _linear(start: float, end: float, frames: int, over_frames: int) -> float:
+    """``start`` moving linearly to ``end`` over ``over_frames`` frames, then ``end``."""
+    fraction = min(frames / over_frames, 1.0)
+    return start + fraction * (end - start)
+
+
 def imitation_coeff(config: TrainConfig, frames: int) -> float:
     """Weight of the imitation term after ``frames``: ``teacher.coeff`` at first, linearly
     to ``teacher.final`` at ``teacher.frames``, then ``teacher.final``."""
     teacher = config.teacher
     if teacher.frames == 0:
         return teacher.final
-    fraction = min(frames / teacher.frames, 1.0)
-    return teacher.coeff + fraction * (teacher.final - teacher.coeff)
+    return _linear(teacher.coeff, teacher.final, frames, teacher.frames)
 
 
 def learning_rate(config: TrainConfig, frames: int) -> float:
@@ -23,13 +28,12 @@ def learning_rate(config: TrainConfig, frames: int) -> float:
     ppo = config.ppo
     if not ppo.anneal_lr:
         return ppo.lr
-    fraction = min(frames / config.total_frames, 1.0)
-    return ppo.lr * (1.0 - fraction * (1.0 - ppo.lr_final_fraction))
+    return _linear(ppo.lr, ppo.lr * ppo.lr_final_fraction, frames, config.total_frames)
 
 
 def entropy_coeff(config: TrainConfig, frames: int) -> float:
     """Weight of the entropy bonus after ``frames``: ``ppo.entropy_coeff`` falling linearly to
     ``ppo.entropy_coeff × ppo.entropy_final_fraction`` at ``total_frames``."""
     ppo = config.ppo
-    fraction = min(frames / config.total_frames, 1.0)
-    return ppo.entropy_coeff * (1.0 - fraction * (1.0 - ppo.entropy_final_fraction))
+    final = ppo.entropy_coeff * ppo.entropy_final_fraction
+    return _linear(ppo.entropy_coeff, final, frames, config.total_frames)
