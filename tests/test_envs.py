@@ -228,7 +228,7 @@ def test_make_env_is_exported_lazily():
     assert crllk.make_env is make_env
 
 
-@pytest.mark.parametrize("factor", [2, 3, 4])
+@pytest.mark.parametrize("factor", [2, 3, 4, 5, 16])
 def test_box_average_is_the_rounded_float_mean(factor):
     """The integer downsampling of camera images gives exactly the rounded float32 block mean,
     including every 2x2 block sum that rounds half up."""
