@@ -191,6 +191,7 @@ def test_bad_input_is_one_line(tmp_path, capsys, command, argv, words):
     program = torch.onnx.export(torch.nn.Linear(2, 2).eval(), (torch.zeros(2),), dynamo=True,
                                 verbose=False)
     paths["plain_onnx"].write_bytes(program.model_proto.SerializeToString())
+    capsys.readouterr()  # what the export above printed is not the command's
     main = {"export": export.main, "deploy": deploy.main}[command]
     try:
         status = exit_status(lambda: main([a.format(**paths) for a in argv]))
