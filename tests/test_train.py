@@ -83,7 +83,7 @@ def test_multiplier_rises_while_the_constraint_is_violated(tmp_path):
     """An untrained policy leaves the road: λ_coll must grow from 0 by dual ascent."""
     run = run_in_process(tmp_path / "run", 3, ["algo.constraints.collision.step_size=0.5",
                                                "obs=state", "num_envs=4", "rollout_steps=96",
-                                               "task.horizon=512"],
+                                               "task.horizon=512", "eval.final=false"],
                          frames_per_iteration=4 * 96)
     rows = read_rows(run / "metrics.csv")
     collisions = [float(r["J_coll"]) for r in rows if int(r["episodes"]) > 0]
@@ -155,7 +155,8 @@ def test_killed_run_resumes_exactly(tmp_path, randomize):
 
 def test_command_line_run_prints_its_directory(tmp_path):
     result = run_command(*TINY, f"run_dir={tmp_path / 'cli'}", "total_frames=16",
-                         "task=obstacle_loop")
+                         "task=obstacle_loop", "obs=state", "eval.episodes=100",
+                         "eval.num_envs=10")  # crllk.evaluate's settings
     assert result.returncode == 0, result.stderr[-2000:]
     assert f"run directory: {tmp_path / 'cli'}" in result.stdout
     assert (tmp_path / "cli" / "metrics.csv").exists()

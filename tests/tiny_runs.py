@@ -17,7 +17,10 @@ from crllk.training.loop import train
 NUM_ENVS, ROLLOUT = 2, 8
 FRAMES_PER_ITERATION = NUM_ENVS * ROLLOUT
 TINY = [f"num_envs={NUM_ENVS}", f"rollout_steps={ROLLOUT}", "ppo.minibatch_size=8",
-        "ppo.epochs=2", "task.horizon=12", "progress=false", "checkpoint_every=1"]
+        "ppo.epochs=2", "task.horizon=12", "progress=false", "checkpoint_every=1",
+        "eval.episodes=4", "eval.num_envs=2"]
+"""Overrides of a tiny run; its evaluations play 4 episodes (the default 100 from pixels cost
+a test 5–15 s each)."""
 
 
 def run_in_process(run_dir: Path, iterations: int, extra: list[str] = (), *,

@@ -103,6 +103,14 @@ def spawn_viewer(port: int = VIEWER_PORT) -> str:
     return url
 
 
+def has_display() -> bool:
+    """Whether a window can be opened: always off Linux; on Linux, an X11 or Wayland display
+    is named in the environment (without one a viewer listens first and exits right after,
+    which can take longer than :data:`_SPAWN_GRACE` on a busy machine)."""
+    return not sys.platform.startswith("linux") or any(
+        os.environ.get(name) for name in ("DISPLAY", "WAYLAND_DISPLAY", "WAYLAND_SOCKET"))
+
+
 def start_viewer(port: int, *args: str, timeout: float = _SPAWN_TIMEOUT) -> subprocess.Popen:
     """Run ``rerun --bind 127.0.0.1 --port <port> <args>`` in a session of its own and wait
     until it listens on the port; the viewer outlives this process unless stopped with
@@ -115,6 +123,9 @@ def start_viewer(port: int, *args: str, timeout: float = _SPAWN_TIMEOUT) -> subp
     executable = _viewer_executable()
     if executable is None:
         raise RuntimeError(f"no `rerun` executable on PATH or in {Path(sys.executable).parent}")
+    if "--headless" not in args and not has_display():
+        raise RuntimeError("the viewer cannot open a window: no display (DISPLAY and "
+                           "WAYLAND_DISPLAY are unset)")
     with tempfile.TemporaryFile() as log:
         process = subprocess.Popen(
             [executable, "--bind", VIEWER_HOST, "--port", str(port), *args],
