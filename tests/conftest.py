@@ -14,12 +14,14 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 os.environ.setdefault("PYOPENGL_PLATFORM", os.environ["MUJOCO_GL"])
 
 
-TINY_EXPERIMENT = ["--frames", "16", "--seeds", "0", "--episodes", "2", "--set", "num_envs=2",
+TINY_EXPERIMENT = ["--frames", "16", "--seeds", "0", "--episodes", "2", "--jobs", "1",
+                   "--set", "num_envs=2",
                    "rollout_steps=8", "ppo.minibatch_size=8", "ppo.epochs=1", "task.horizon=12",
                    "eval.every=1", "eval.episodes=2", "eval.num_envs=10"]
-"""``python -m crllk.experiments`` settings small enough for a test: one 16-frame run per agent.
-Its runs make their final evaluation with ``crllk.evaluate``'s settings (episodes, seed and ten
-simulations), so the experiment reuses it and evaluates only their mode."""
+"""``python -m crllk.experiments`` settings small enough for a test: one 16-frame run per agent,
+one at a time in the experiment's own processes (no worker to start: the other core runs other
+tests). Its runs make their final evaluation with ``crllk.evaluate``'s settings (episodes, seed
+and ten simulations), so the experiment reuses it and evaluates only their mode."""
 
 
 @pytest.fixture(scope="session")

@@ -195,8 +195,9 @@ def table_markdown(document: dict[str, Any]) -> str:
         f"- Observation: `{obs}`" + (" (lane-relative features, not the camera)"
                                      if obs == "state" else " (the 30×40 camera image)") + ".",
         f"- Budget: {settings['frames']:,} environment frames per run (training wall time "
-        f"{min(minutes):.1f}–{max(minutes):.1f} min per run, {settings['jobs']} runs at a "
-        "time).",
+        f"{min(minutes):.1f}–{max(minutes):.1f} min per run, "
+        + ("one run at a time)." if settings["jobs"] == 1
+           else f"{settings['jobs']} runs at a time)."),
         f"- Evaluation: {settings['episodes']} episodes per run of the sampled policy (the one "
         f"the constraints are learned for), spawn and sampling seed {settings['eval_seed']} "
         "(never a training seed), the last checkpoint" + (
