@@ -44,6 +44,7 @@ from crllk.settings import (
 from crllk.tasks.actions import ACTIONS
 from crllk.tasks.follower import FollowerGains
 from crllk.training.config import EVALUATION_SEED, algo_thresholds
+from crllk.training.run_dir import EVAL_RECORDING
 
 SOURCE = "evaluate"
 @dataclass
@@ -98,6 +99,8 @@ class EvaluateConfig:
         for run_dir in self.run_dirs():
             if not run_dir.is_dir():
                 yield "run", f"no such run directory: {run_dir}"
+            elif self.record and (problem := write_problem(run_dir / EVAL_RECORDING)):
+                yield "record", f"cannot write the recording: {problem}"
         problem = write_problem(self.out) if self.out else None
         if problem:
             yield "out", problem

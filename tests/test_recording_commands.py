@@ -74,3 +74,4 @@ def test_evaluation_records_episodes_or_fails_clearly(tmp_path):
     assert result.returncode == 2
     assert result.stderr.startswith("error:") and "cannot write the recording" in result.stderr
     assert "Traceback" not in result.stderr
+    assert result.stdout == ""  # refused before playing an episode

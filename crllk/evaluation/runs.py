@@ -17,6 +17,7 @@ from crllk.rl.rollout import EvaluationResult, run_episodes
 from crllk.tasks.follower import FollowerGains, FollowerPolicy
 from crllk.training.build import build_env
 from crllk.training.config import EVALUATION_SEED, TrainConfig, algo_thresholds
+from crllk.training.run_dir import EVAL_RECORDING
 from crllk.training.runs import EVAL_FILE, load_actor, load_run_config
 
 EVALUATION_ENVS = 10
@@ -119,7 +120,7 @@ def record_run(run_dir: str | Path, *, episodes: int, seed: int | None = None,
 
     config = load_run_config(run_dir)
     env = build_env(config, num_envs=1, seed=config.eval.seed if seed is None else seed)
-    path = Path(run_dir) / "recordings" / "eval.rrd"
+    path = Path(run_dir) / EVAL_RECORDING
     try:
         actor, info = load_actor(run_dir, env)
         report = record_episodes(env, actor, episodes, path, deterministic=deterministic,

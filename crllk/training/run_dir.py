@@ -11,6 +11,8 @@ from crllk.errors import ConfigError
 
 SOURCE_RUN = "run"
 """How errors about the run directory name their source."""
+EVAL_RECORDING = Path("recordings") / "eval.rrd"
+"""Where ``python -m crllk.evaluate record=true`` records a run's episodes, in its directory."""
 
 
 def lock_run_dir(run_dir: Path) -> io.TextIOWrapper:
