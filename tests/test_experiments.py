@@ -265,7 +265,7 @@ def test_a_table_from_a_sweep_run_by_hand(tmp_path):
     tiny = TINY_EXPERIMENT[TINY_EXPERIMENT.index("--set") + 1:]
     sweep = subprocess.run(
         [sys.executable, "-m", "crllk.train", "-m", "agent=CRLLK-D,PPO-D", "task=small_loop",
-         "seed=0", "total_frames=16", "progress=false", *tiny,
+         "seed=0", "total_frames=16", "progress=false", "hydra.launcher.n_jobs=1", *tiny,
          f"run_dir={runs}/pixels/${{task.name}}/${{hydra:runtime.choices.agent}}-a0.5"
          "-seed${seed}"], cwd=REPO, capture_output=True, text=True, timeout=600)
     assert sweep.returncode == 0, sweep.stderr[-2000:]
