@@ -67,11 +67,13 @@ def print_parity(pilot: Pilot, tasks: Sequence[str], frames: int) -> int:
     """Prints :func:`crllk.deployment.parity.pilot_parity` per task."""
     for task in tasks:
         load_task_config(task)  # a bad task ends here
+    rendered = (f" (simulator images supersampled {pilot.supersample}x, as in training)"
+                if pilot.supersample else "")
     for task in tasks:
         parity = pilot_parity(pilot, task, frames)
         print(f"{task}: the same command on {parity.same} of {parity.frames} frames "
               f"({100 * parity.agreement:.1f} %); mean image difference "
-              f"{parity.mean_pixel_difference:.2f} of 255", flush=True)
+              f"{parity.mean_pixel_difference:.2f} of 255{rendered}", flush=True)
     return 0
 
 

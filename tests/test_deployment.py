@@ -202,14 +202,16 @@ def test_bad_input_is_one_line(tmp_path, capsys, command, argv, words):
     assert len(err.splitlines()) == 1
 
 
-@pytest.mark.parametrize("history", ["[0, 1]", "[2]", "[2, -3]", "two"])
-def test_a_policy_with_bad_history_metadata_is_one_line(pixel_policy, history):
-    """An exported file whose ``crllk.history`` was edited by hand: a ConfigError naming the
-    file and the metadata, not a traceback."""
+@pytest.mark.parametrize("key, value", [("history", "[0, 1]"), ("history", "[2]"),
+                                        ("history", "[2, -3]"), ("history", "two"),
+                                        ("supersample", "0"), ("supersample", "eight")])
+def test_a_policy_with_bad_metadata_is_one_line(pixel_policy, key, value):
+    """An exported file whose ``crllk.history`` or ``crllk.supersample`` was edited by hand: a
+    ConfigError naming the file and the metadata, not a traceback."""
     from crllk.errors import ConfigError
 
     pilot = Pilot.from_onnx(pixel_policy)
-    metadata = {**pilot.metadata, "history": history}
+    metadata = {**pilot.metadata, key: value}
     with pytest.raises(ConfigError) as error:
         Pilot(pilot.session, metadata, str(pixel_policy))
     assert str(error.value).startswith(f"{pixel_policy}: metadata: not a crllk policy")
@@ -236,9 +238,16 @@ def test_parity_of_camera_frames_and_simulator_images(pixel_policy, capsys):
     640x480 with the policy on the simulator's 30x40 images, which differ by JPEG noise."""
     from crllk.deployment.parity import pilot_parity
 
-    parity = pilot_parity(Pilot.from_onnx(pixel_policy), "small_loop", frames=20)
+    pilot = Pilot.from_onnx(pixel_policy)
+    assert pilot.supersample == 2  # the task's, as the run trained
+    parity = pilot_parity(pilot, "small_loop", frames=20)
     assert parity.frames == 20 and 0 <= parity.same <= 20
     assert 0 < parity.mean_pixel_difference < 4.0
+    # a policy trained on images supersampled 8x is compared with images rendered so, which
+    # lie closer to the camera's 640x480 frames
+    finer = Pilot(pilot.session, {**pilot.metadata, "supersample": "8"}, pilot.source)
+    assert pilot_parity(finer, "small_loop", frames=20).mean_pixel_difference < (
+        parity.mean_pixel_difference / 2)
     assert exit_status(lambda: deploy.main(["--policy", str(pixel_policy), "--parity",
                                             "small_loop", "--parity-frames", "5"])) == 0
     assert "small_loop: the same command on" in capsys.readouterr().out

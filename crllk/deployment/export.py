@@ -4,9 +4,9 @@ The graph has one input, ``observation`` (uint8 ``[30, 40, 3]`` RGB for pixel ru
 40, 3 * history]`` with a frame history, float32 ``[F]`` state features for state runs), and one
 output, ``duty`` (float32 ``[2]``: left and right wheel duty cycles in [-1, 1]). What the pilot
 needs to feed it is in the model's metadata: ``crllk.observation``, ``crllk.action``,
-``crllk.observation_shape``, ``crllk.history`` (images and steps between them), and where it
-comes from
-(``crllk.task``, ``crllk.run``, ``crllk.iteration``, ``crllk.frames``).
+``crllk.observation_shape``, ``crllk.history`` (images and steps between them),
+``crllk.supersample`` (how much larger training rendered each image before averaging it down),
+and where it comes from (``crllk.task``, ``crllk.run``, ``crllk.iteration``, ``crllk.frames``).
 """
 
 from __future__ import annotations
@@ -39,12 +39,14 @@ def deployed_policy(run_dir: str | Path) -> tuple[DeployedPolicy, dict[str, Any]
     try:
         actor, info = load_actor(run_dir, env)
         shape = tuple(int(n) for n in env.observation_spec[config.obs.name].shape[1:])
+        supersample = env.config.camera.supersample
     finally:
         env.close()
     policy = DeployedPolicy(actor, config.action.name).eval()
     metadata = {"observation": config.obs.name, "action": config.action.name,
                 "observation_shape": json.dumps(list(shape)),
                 "history": json.dumps([config.obs.history, config.obs.history_stride]),
+                "supersample": str(supersample),
                 "task": config.task_name,
                 "run": str(Path(run_dir).resolve()), "iteration": str(info["iteration"]),
                 "frames": str(info["frames"])}

@@ -4,7 +4,8 @@ The scripted lane follower drives a task; at every step the simulator renders th
 twice: the policy's own 30×40 observation, and a 640×480 frame as the Duckiebot camera takes
 it, JPEG-encoded as the camera publishes it. The pilot steps on the JPEG; the policy reads the
 observation (each with its own memory of images, for a policy with a frame history). Their
-wheel commands agree when the policy chose the same action.
+wheel commands agree when the policy chose the same action. The simulator renders the policy's
+images as its training did (the supersampling the export records).
 """
 
 from __future__ import annotations
@@ -36,7 +37,8 @@ class Parity:
 def pilot_parity(pilot: Pilot, task: str, frames: int = 900, seed: int = 0,
                  quality: int = JPEG_QUALITY) -> Parity:
     """Compares the pilot on JPEG camera frames with the policy on the simulator's images."""
-    env = load(task, observation="pixels", action="duty", seed=seed)
+    overrides = {"camera": {"supersample": pilot.supersample}} if pilot.supersample else None
+    env = load(task, observation="pixels", action="duty", seed=seed, overrides=overrides)
     follower = LaneFollower(env.task.map, env.task.config.motor)
     simulated = Pilot(pilot.session, pilot.metadata, pilot.source)  # its own image memory
     step = env.reset()

@@ -52,6 +52,12 @@ class Pilot:
             self.history = (FrameHistory(1, (*self.observation_shape[:2], 3), count, stride)
                             if self.observation == "pixels" else None)
             """The images the policy remembers (pixel policies)."""
+            supersample = metadata.get("supersample")
+            self.supersample = None if supersample is None else int(supersample)
+            if self.supersample is not None and self.supersample < 1:
+                raise ValueError(supersample)
+            """How much larger training rendered its images before averaging them down (None
+            for exports that do not say)."""
         except (KeyError, ValueError, TypeError):
             raise ConfigError(source, "metadata", "not a crllk policy (export it with "
                               "python -m crllk.export)") from None
