@@ -13,9 +13,7 @@ import os
 os.environ.setdefault("MUJOCO_GL", "egl")
 os.environ.setdefault("PYOPENGL_PLATFORM", os.environ["MUJOCO_GL"])
 
-from crllk import maps
 from crllk.errors import show_map_warnings_on_one_line
-from crllk.tasks.lane_keeping import load
 
 show_map_warnings_on_one_line()
 
@@ -23,10 +21,19 @@ __all__ = ["load", "make_env", "maps"]
 
 
 def __getattr__(name: str):
-    """``crllk.make_env`` imports TorchRL only when first used."""
+    """``crllk.load``, ``crllk.make_env`` and ``crllk.maps`` import MuJoCo, dm-control and
+    TorchRL only when first used, so that parts which need none of them (the pilot on a
+    robot) import without them."""
+    if name == "load":
+        from crllk.tasks.lane_keeping import load
+
+        return load
     if name == "make_env":
         from crllk.envs.batched import make_env
 
         return make_env
+    if name == "maps":
+        import crllk.maps
+
+        return crllk.maps
     raise AttributeError(f"module 'crllk' has no attribute {name!r}")
-__version__ = "0.1.0"

@@ -22,10 +22,8 @@ import numpy as np
 
 from crllk.cli import Parser, fail, positive_int, run
 from crllk.deployment.frames import read_frames
-from crllk.deployment.parity import pilot_parity
 from crllk.deployment.pilot import Pilot, WheelCommand
 from crllk.files import atomic_write_text, write_problem
-from crllk.tasks.config import load_task_config
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -64,7 +62,11 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def print_parity(pilot: Pilot, tasks: Sequence[str], frames: int) -> int:
-    """Prints :func:`crllk.deployment.parity.pilot_parity` per task."""
+    """Prints :func:`crllk.deployment.parity.pilot_parity` per task. (The simulator is
+    imported here: on a robot, the frames path needs only the pilot's own libraries.)"""
+    from crllk.deployment.parity import pilot_parity
+    from crllk.tasks.config import load_task_config
+
     for task in tasks:
         load_task_config(task)  # a bad task ends here
     rendered = (f" (simulator images supersampled {pilot.supersample}x, as in training)"

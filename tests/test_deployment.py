@@ -18,7 +18,7 @@ from crllk.cli import exit_status
 from crllk.deployment.export import deployed_policy
 from crllk.deployment.frames import read_frames
 from crllk.deployment.pilot import Pilot
-from crllk.sim.physics import box_average
+from crllk.images import box_average
 from crllk.tasks.actions import action_duty
 from crllk.tasks.frames import crop_to_aspect, policy_image
 from crllk.training.build import build_env
@@ -216,6 +216,21 @@ def test_a_policy_with_bad_metadata_is_one_line(pixel_policy, key, value):
         Pilot(pilot.session, metadata, str(pixel_policy))
     assert str(error.value).startswith(f"{pixel_policy}: metadata: not a crllk policy")
     assert "\n" not in str(error.value)
+
+
+def test_the_robot_needs_no_training_stack():
+    """The pilot and the ROS 2 node import numpy, Pillow and ONNX Runtime, and none of the
+    simulation or training libraries a Duckiebot would otherwise have to install."""
+    import subprocess
+    import sys
+
+    heavy = ["torch", "torchrl", "tensordict", "mujoco", "dm_control", "hydra", "rerun",
+             "matplotlib", "cv2", "gymnasium"]
+    code = ("import sys, crllk.deployment.ros_node, crllk.deploy; "
+            f"print(sorted(m for m in {heavy!r} if m in sys.modules))")
+    found = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                           check=True).stdout.strip()
+    assert found == "[]", found
 
 
 def test_frames_that_are_not_frames(tmp_path):

@@ -14,7 +14,7 @@ from torchrl.envs.utils import check_env_specs
 
 import crllk
 from crllk.envs.batched import TERMINATIONS, BatchedLaneKeepingEnv, make_env, sub_env_seeds
-from crllk.sim.physics import box_average
+from crllk.images import box_average
 
 TASK = "small_loop"
 NUM_ENVS = 2

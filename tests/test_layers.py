@@ -13,7 +13,7 @@ import crllk
 PACKAGE = Path(crllk.__file__).parent
 
 LAYERS = (
-    ("crllk.errors", "crllk.files", "crllk.paths", "crllk.settings", "crllk.cli"),
+    ("crllk.errors", "crllk.files", "crllk.paths", "crllk.settings", "crllk.cli", "crllk.images"),
     ("crllk.maps",),
     ("crllk.sim",),
     ("crllk.tasks",),

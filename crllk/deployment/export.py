@@ -22,14 +22,13 @@ from typing import Any
 import onnx
 import torch
 
+from crllk.deployment.onnx_names import INPUT, METADATA_PREFIX, OUTPUT
 from crllk.deployment.policy import DeployedPolicy
 from crllk.files import atomic_write
 from crllk.training.build import build_env
 from crllk.training.runs import load_actor, load_run_config
 
 OPSET = 18
-INPUT, OUTPUT = "observation", "duty"
-METADATA_PREFIX = "crllk."
 
 
 def deployed_policy(run_dir: str | Path) -> tuple[DeployedPolicy, dict[str, Any]]:

@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 import onnxruntime
 
-from crllk.deployment.export import INPUT, METADATA_PREFIX
+from crllk.deployment.onnx_names import INPUT, METADATA_PREFIX
 from crllk.errors import ConfigError
 from crllk.tasks.frames import FrameHistory, policy_image
 

@@ -15,6 +15,7 @@ import numpy as np
 from dm_control import mujoco as dm_mujoco
 from dm_control.mujoco.wrapper import MjModel
 
+from crllk.images import box_average
 from crllk.maps import DuckietownMap
 from crllk.sim import constants as C
 from crllk.sim.motor import MotorConfig, clip_duty
@@ -89,32 +90,6 @@ _RK4 = int(mujoco.mjtIntegrator.mjINT_RK4)
 _FULL_STATE = mujoco.mjtState.mjSTATE_INTEGRATION
 """Everything ``mj_step`` reads: time, qpos, qvel, act, the actuators' delay history,
 warm start, ctrl, applied forces, mocap, equality flags, user data and plugin state."""
-
-
-_STRIDED_FACTOR_MAX = 4
-"""Largest factor :func:`box_average` sums as strided sub-images (faster up to here)."""
-
-
-def box_average(image: np.ndarray, factor: int) -> np.ndarray:
-    """Shrink a uint8 H×W×C image ``factor`` times per axis: each pixel the mean of its
-    ``factor`` x ``factor`` block, rounded half up. Integer arithmetic: the same values as
-    ``(block.mean(dtype=float32) + 0.5).astype(uint8)``, several times faster. Small factors
-    (training's supersampling) add the strided sub-images; large ones (a 640×480 camera
-    frame) sum rows in blocks, then columns, about 4× faster there."""
-    count = factor * factor
-    if factor <= _STRIDED_FACTOR_MAX:
-        total = np.full_like(image[::factor, ::factor], count // 2, dtype=np.uint32)
-        for i in range(factor):
-            for j in range(factor):
-                total += image[i::factor, j::factor]
-    else:
-        rows, columns, channels = image.shape
-        row_sums = image.reshape(rows // factor, factor, columns * channels).sum(
-            axis=1, dtype=np.uint32)
-        total = row_sums.reshape(rows // factor, columns // factor, factor, channels).sum(axis=2)
-        total += count // 2
-    total //= count
-    return total.astype(np.uint8)
 
 
 class Physics(dm_mujoco.Physics):

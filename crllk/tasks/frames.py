@@ -21,7 +21,7 @@ import numpy as np
 from PIL import Image
 
 from crllk.errors import ConfigError
-from crllk.sim.physics import box_average
+from crllk.images import box_average
 
 POLICY_IMAGE = (30, 40)
 """Height and width (pixels) of the policy's camera image."""

@@ -1,0 +1,9 @@
+"""The names an exported policy's ONNX graph and metadata use, shared by the export and the
+pilot (no imports, so that the pilot on a robot needs no training stack)."""
+
+INPUT, OUTPUT = "observation", "duty"
+"""The graph's input and output."""
+METADATA_PREFIX = "crllk."
+"""Prefix of the metadata keys (``crllk.observation``, ``crllk.supersample``, ...)."""
+
+__all__ = ["INPUT", "METADATA_PREFIX", "OUTPUT"]
