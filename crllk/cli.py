@@ -39,6 +39,17 @@ def non_negative_int(text: str) -> int:
     return _whole_number_at_least(text, 0)
 
 
+def positive_float(text: str) -> float:
+    """A finite number above zero (an argparse ``type``)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not (value > 0 and value != float("inf")):
+        raise argparse.ArgumentTypeError(f"must be a finite number above 0, got {text}")
+    return value
+
+
 DEBUG_VARIABLE = "CRLLK_DEBUG"
 """Set (``CRLLK_DEBUG=1``) to see the traceback of an error instead of its one line."""
 

@@ -15,6 +15,7 @@ from torchrl.envs.utils import ExplorationType, set_exploration_type, step_mdp
 
 from crllk import deploy, export
 from crllk.cli import exit_status
+from crllk.deployment import ros_node
 from crllk.deployment.export import deployed_policy
 from crllk.deployment.frames import read_frames
 from crllk.deployment.pilot import Pilot
@@ -183,6 +184,10 @@ def test_deploy_writes_the_commands_of_a_folder_and_of_a_video(pixel_policy, tmp
     ("deploy", ["--policy", "{missing}", "--frames", "{tmp}"], "policy: no such file"),
     ("deploy", ["--policy", "{not_onnx}", "--frames", "{tmp}"], "policy: not an ONNX model"),
     ("deploy", ["--policy", "{plain_onnx}", "--frames", "{tmp}"], "not a crllk policy"),
+    ("ros_node", ["--policy", "{missing}", "--vehicle", "duck"], "policy: no such file"),
+    ("ros_node", ["--policy", "{missing}", "--vehicle", "duck", "--rate", "0"],
+     "--rate: must be a finite number above 0"),
+    ("ros_node", ["--policy", "{missing}"], "--vehicle"),
 ])
 def test_bad_input_is_one_line(tmp_path, capsys, command, argv, words):
     paths = {"missing": tmp_path / "missing", "tmp": tmp_path,
@@ -192,7 +197,7 @@ def test_bad_input_is_one_line(tmp_path, capsys, command, argv, words):
                                 verbose=False)
     paths["plain_onnx"].write_bytes(program.model_proto.SerializeToString())
     capsys.readouterr()  # what the export above printed is not the command's
-    main = {"export": export.main, "deploy": deploy.main}[command]
+    main = {"export": export.main, "deploy": deploy.main, "ros_node": ros_node.main}[command]
     try:
         status = exit_status(lambda: main([a.format(**paths) for a in argv]))
     except SystemExit as exit_info:
@@ -216,6 +221,16 @@ def test_a_policy_with_bad_metadata_is_one_line(pixel_policy, key, value):
         Pilot(pilot.session, metadata, str(pixel_policy))
     assert str(error.value).startswith(f"{pixel_policy}: metadata: not a crllk policy")
     assert "\n" not in str(error.value)
+
+
+def test_the_node_without_ros_is_one_line(pixel_policy, capsys):
+    """Off the robot (no rclpy here) the node names what is missing, in one line."""
+    with pytest.raises(SystemExit) as exit_info:
+        ros_node.main(["--policy", str(pixel_policy), "--vehicle", "duck"])
+    status = exit_info.value.code
+    err = capsys.readouterr().err.strip()
+    assert status == 2 and err.startswith("error: ros_node: cannot import rclpy"), err
+    assert len(err.splitlines()) == 1
 
 
 def test_the_robot_needs_no_training_stack():

@@ -15,27 +15,33 @@ when it runs.
 
 from __future__ import annotations
 
-import argparse
 import threading
+from collections.abc import Sequence
 
+from crllk.cli import Parser, fail, positive_float, run
 from crllk.deployment.pilot import Pilot
 
 CONTROL_RATE_HZ = 30.0
 """Steps per second: the policies' control rate."""
 
 
-def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def main(argv: Sequence[str] | None = None) -> None:
+    parser = Parser(description=__doc__.splitlines()[0])
     parser.add_argument("--policy", required=True, help="an exported policy (.onnx)")
     parser.add_argument("--vehicle", required=True, help="the robot's name (topic prefix)")
-    parser.add_argument("--rate", type=float, default=CONTROL_RATE_HZ, help="steps per second")
+    parser.add_argument("--rate", type=positive_float, default=CONTROL_RATE_HZ,
+                        help="steps per second")
     args = parser.parse_args(argv)
     pilot = Pilot.from_onnx(args.policy)
 
-    import rclpy  # only on the robot
-    from duckietown_msgs.msg import WheelsCmdStamped
-    from rclpy.node import Node
-    from sensor_msgs.msg import CompressedImage
+    try:  # only on the robot
+        import rclpy
+        from duckietown_msgs.msg import WheelsCmdStamped
+        from rclpy.node import Node
+        from sensor_msgs.msg import CompressedImage
+    except ImportError as err:
+        fail(f"ros_node: cannot import {err.name}: run the node on the robot, with ROS 2 and "
+             "duckietown_msgs sourced")
 
     class PilotNode(Node):
         def __init__(self) -> None:
@@ -79,4 +85,4 @@ def main(argv: list[str] | None = None) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run(main)
