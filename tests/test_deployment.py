@@ -4,6 +4,7 @@ as in training, and the pilot and ``crllk.deploy`` turn frames into commands."""
 from __future__ import annotations
 
 import io
+from pathlib import Path
 
 import numpy as np
 import onnxruntime
@@ -221,6 +222,25 @@ def test_a_policy_with_bad_metadata_is_one_line(pixel_policy, key, value):
         Pilot(pilot.session, metadata, str(pixel_policy))
     assert str(error.value).startswith(f"{pixel_policy}: metadata: not a crllk policy")
     assert "\n" not in str(error.value)
+
+
+ROBOT_RUN = (Path(__file__).resolve().parents[1] / "results" / "runs" / "pixels" / "small_loop"
+             / "CRLLK-D-rand-ss8-a0.5-seed1")
+"""The committed policy trained for the robot (randomised, images supersampled 8x)."""
+
+
+def test_the_robot_policy_acts_alike_on_camera_frames(tmp_path):
+    """The committed robot policy, exported, gives the same command on JPEG 640x480 camera
+    frames as on the simulator's own images on at least 99 of 100 frames, its images rendered
+    at the supersampling of its training."""
+    from crllk.deployment.parity import pilot_parity
+
+    out = tmp_path / "robot.onnx"
+    assert exit_status(lambda: export.main([f"run={ROBOT_RUN}", f"out={out}"])) == 0
+    pilot = Pilot.from_onnx(out)
+    assert pilot.supersample == 8
+    parity = pilot_parity(pilot, "small_loop", frames=100)
+    assert parity.same >= 99 and parity.mean_pixel_difference < 1.0, parity
 
 
 def test_the_node_without_ros_is_one_line(pixel_policy, capsys):
