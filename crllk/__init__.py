@@ -37,3 +37,4 @@ def __getattr__(name: str):
 
         return crllk.maps
     raise AttributeError(f"module 'crllk' has no attribute {name!r}")
+__version__ = "0.1.0"

@@ -254,7 +254,7 @@ def test_the_node_without_ros_is_one_line(pixel_policy, capsys):
 
 
 def test_the_robot_needs_no_training_stack():
-    """The pilot and the ROS 2 node import numpy, Pillow and ONNX Runtime, and none of the
+    """The pilot and the ROS 2 node import numpy, Pillow, PyYAML and ONNX Runtime, and none of the
     simulation or training libraries a Duckiebot would otherwise have to install."""
     import subprocess
     import sys

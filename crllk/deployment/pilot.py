@@ -54,10 +54,10 @@ class Pilot:
             """The images the policy remembers (pixel policies)."""
             supersample = metadata.get("supersample")
             self.supersample = None if supersample is None else int(supersample)
-            if self.supersample is not None and self.supersample < 1:
-                raise ValueError(supersample)
             """How much larger training rendered its images before averaging them down (None
             for exports that do not say)."""
+            if self.supersample is not None and self.supersample < 1:
+                raise ValueError(supersample)
         except (KeyError, ValueError, TypeError):
             raise ConfigError(source, "metadata", "not a crllk policy (export it with "
                               "python -m crllk.export)") from None
