@@ -13,6 +13,7 @@ from conftest import TINY_EXPERIMENT
 
 from crllk.experiments import AGENTS, PAPER_TABLE1, sweep_markdown, table_markdown
 from crllk.experiments.runs import MODE_EVALUATION
+from crllk.experiments.seeds import seed_cells, seeds_markdown, seeds_table, table_documents
 from crllk.training.runs import read_eval_json
 
 REPO = Path(__file__).resolve().parents[1]
@@ -57,6 +58,45 @@ def test_map_tables_and_figure1_are_written(tiny_experiments):
     for name in ("figure1_curves.png", "figure1_actions.png"):
         assert (results / name).read_bytes()[:4] == b"\x89PNG"
     assert (runs / "small_loop" / "CRLLK-D-a0.75-seed0" / "eval.json").exists()
+
+
+def test_every_seed_is_written_beside_the_tables(tiny_experiments):
+    """seeds.md holds a row per agent and seed, a column per map, from the tables' JSON."""
+    runs, results, _ = tiny_experiments
+    documents = table_documents(results)
+    assert list(documents) == ["table1", "table_zigzag", "table_obstacle_loop"]
+    markdown = (results / "seeds.md").read_text()
+    assert markdown == seeds_markdown(documents)
+    assert "| agent, seed | small_loop | zigzag | obstacle_loop |" in markdown
+    summary = read_eval_json(runs / "zigzag" / "PPO-C-a0.5-seed0")["summary"]
+    row = next(line for line in markdown.splitlines() if line.startswith("| PPO-C seed 0 |"))
+    assert row.split(" | ")[2].startswith(
+        f"{summary['J_clane']:.3f} / {summary['J_coll']:.2f} / {summary['J_R']:.2f} ")
+    assert "## The deployed policy" in markdown
+
+
+def _entry(runs, clane, coll, travel, satisfied):
+    return {"runs": runs, "J_clane": {"values": clane}, "J_coll": {"values": coll},
+            "J_R": {"values": travel}, "satisfied": satisfied}
+
+
+def test_seed_cells_and_table_worked_example():
+    entry = _entry(["r/CRLLK-D-a0.5-seed1", "r/CRLLK-D-a0.5-seed0"], [0.4, 0.1234], [0.03, 0.0],
+                   [2.694, 2.8], [False, True])
+    assert seed_cells(entry) == {1: "0.400 / 0.03 / 2.69 ✗", 0: "0.123 / 0.00 / 2.80 ✓"}
+    documents = {"table1": {"task": "small_loop", "agents": {"CRLLK-D": entry}},
+                 "table_zigzag": {"task": "zigzag", "agents": {
+                     "PPO-D": _entry(["r/PPO-D-a0.5-seed0"], [0.1], [0.0], [2.0], [True])}}}
+    assert seeds_table(documents) == [
+        "| agent, seed | small_loop | zigzag |",
+        "| --- | --- | --- |",
+        "| CRLLK-D seed 0 | 0.123 / 0.00 / 2.80 ✓ | — |",
+        "| CRLLK-D seed 1 | 0.400 / 0.03 / 2.69 ✗ | — |",
+        "| PPO-D seed 0 | — | 0.100 / 0.00 / 2.00 ✓ |"]
+    assert seeds_table(documents, mode=True) == ["| agent, seed | small_loop | zigzag |",
+                                                  "| --- | --- | --- |"]
+    with pytest.raises(ValueError, match="does not end in -seed"):
+        seed_cells(_entry(["r/CRLLK-D"], [0.1], [0.0], [2.0], [True]))
 
 
 def test_a_second_invocation_reuses_finished_runs(tiny_experiments, tmp_path):

@@ -13,6 +13,7 @@ from nbclient import NotebookClient
 
 from crllk.experiments import sweep_markdown, table_markdown
 from crllk.experiments.robustness import robustness_markdown
+from crllk.experiments.seeds import seeds_markdown, table_documents
 
 REPO = Path(__file__).resolve().parents[1]
 RESULTS = REPO / "results"
@@ -40,6 +41,23 @@ def test_committed_markdown_is_what_the_code_writes(path, writer):
     assert document["settings"]["obs"] == path.parent.name
     if writer is not table_markdown:
         assert path.with_suffix(".png").read_bytes()[:4] == b"\x89PNG"
+
+
+@pytest.mark.parametrize("obs", sorted({path.parent.name for path in TABLES}))
+def test_committed_seeds_are_what_the_code_writes(obs):
+    assert (RESULTS / obs / "seeds.md").read_text() == seeds_markdown(
+        table_documents(RESULTS / obs))
+
+
+def test_the_readme_quotes_every_seed_from_the_camera_as_committed():
+    """The README's per-seed tables from the camera are seeds.md's, character for character,
+    so no number in them was copied by hand."""
+    readme = (REPO / "README.md").read_text()
+    tables = [block for block in (RESULTS / "pixels" / "seeds.md").read_text().split("\n\n")
+              if block.startswith("| agent, seed |")]
+    assert len(tables) == 2
+    for table in tables:
+        assert table.strip() in readme
 
 
 def test_committed_pictures_are_pngs():

@@ -14,13 +14,13 @@ experiment picks up where its runs stopped and finished runs are not trained aga
 then evaluated (:func:`crllk.evaluation.runs.evaluate_run`, as ``python -m crllk.evaluate``; an
 ``eval.json`` of the same policy and settings is reused, as the one the trainer writes from its
 final evaluation, which the runs make with the experiment's episodes and seed; so is the policy
-it deploys, its
-mode, into ``eval-mode.json``, where the policy is there) and the results are written to
-``results/<obs>/``: a Markdown table with the paper's numbers beside ours and the JSON behind it,
-or the figures. Runs live in ``results/runs/<obs>/<task>/`` and are kept in the repository
-without their checkpoints but with their policy (configuration, logs, ``eval.json``,
-``policy.pt``), so a finished run is reused by a later invocation, and can be evaluated again
-and exported, where its checkpoints are gone.
+it deploys, its mode, into ``eval-mode.json``, where the policy is there) and the results are
+written to ``results/<obs>/``: a Markdown table with the paper's numbers beside ours and the
+JSON behind it, or the figures, and ``seeds.md``, every seed of the tables' runs side by side
+(:mod:`crllk.experiments.seeds`). Runs live in ``results/runs/<obs>/<task>/`` and are kept in
+the repository without their checkpoints but with their policy (configuration, logs,
+``eval.json``, ``policy.pt``), so a finished run is reused by a later invocation, and can be
+evaluated again and exported, where its checkpoints are gone.
 """
 
 from __future__ import annotations
@@ -58,6 +58,7 @@ from crllk.experiments.runs import (
     Settings,
     train_and_evaluate,
 )
+from crllk.experiments.seeds import write_seeds
 from crllk.files import atomic_write_text, write_problem
 from crllk.training.compose import compose_config
 from crllk.training.config import validate
@@ -228,7 +229,8 @@ def table_markdown(document: dict[str, Any]) -> str:
 def write_table(name: str, title: str, task: str, agents: Sequence[str], outcome: Outcome,
                 settings: Settings, paper: dict[str, Any] | None,
                 pairs: Sequence[tuple[str, str]]) -> Path:
-    """Writes ``results/<name>.json`` (everything behind the table) and ``<name>.md``."""
+    """Writes ``results/<name>.json`` (everything behind the table) and ``<name>.md``, and
+    rewrites ``seeds.md`` from every table there."""
     follower = evaluate_follower(task, episodes=settings.episodes, seed=settings.eval_seed,
                                  thresholds=dict(THRESHOLDS))
     document = {"title": title, "task": task, "thresholds": THRESHOLDS,
@@ -243,6 +245,7 @@ def write_table(name: str, title: str, task: str, agents: Sequence[str], outcome
     atomic_write_text(path.with_suffix(".json"), json.dumps(document, indent=1) + "\n")
     markdown = table_markdown(document)
     atomic_write_text(path, markdown)
+    write_seeds(settings.results)
     print(markdown, flush=True)
     return path
 

@@ -1,0 +1,114 @@
+"""Every seed of every agent on every map, in one place: ``results/<obs>/seeds.md``.
+
+The experiments' tables give mean ± std across seeds; a constraint is claimed per seed, so this
+file shows each seed's evaluation next to the others, for the sampled policy (the one the
+constraints are learned for) and for the deployed one (its mode). It is written from the
+tables' JSON documents (``table1.json`` for ``small_loop``, ``table_<map>.json`` for the
+others) whenever an experiment writes a table, and the README quotes its tables as they are.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+from crllk.experiments.runs import MAP_TASKS
+from crllk.files import atomic_write_text
+
+SEED_OF_RUN = re.compile(r"-seed(\d+)$")
+"""The training seed at the end of a run directory's name (``CRLLK-D-a0.5-seed1``)."""
+
+PER_SEED_METRICS = (("J_clane", 3), ("J_coll", 2), ("J_R", 2))
+"""The three numbers of a cell, with their decimals: lane deviation (dm), collisions per
+episode, travel (m)."""
+
+
+def table_documents(results: Path) -> dict[str, dict[str, Any]]:
+    """The table documents of one observation's results folder, by name (``table1``,
+    ``table_zigzag``, ...): Table 1 first, then the maps tables in the maps experiment's order
+    (then any other ``table_*.json``, by name)."""
+    named = [results / f"table_{task}.json" for task in MAP_TASKS]
+    paths = [results / "table1.json", *named,
+             *(p for p in sorted(results.glob("table_*.json")) if p not in named)]
+    return {path.stem: json.loads(path.read_text()) for path in paths if path.exists()}
+
+
+def seed_cells(entry: Mapping[str, Any]) -> dict[int, str]:
+    """``{seed: "J_clane / J_coll / J_R ✓"}`` of one agent's evaluations (an agent's entry of
+    a table document, or its ``"mode"``): ✓ where every constraint held for that seed, ✗
+    where one did not."""
+    cells = {}
+    for index, run in enumerate(entry["runs"]):
+        match = SEED_OF_RUN.search(run)
+        if match is None:
+            raise ValueError(f"run directory {run!r} does not end in -seed<N>")
+        numbers = " / ".join(f"{entry[metric]['values'][index]:.{digits}f}"
+                             for metric, digits in PER_SEED_METRICS)
+        mark = "✓" if entry["satisfied"][index] else "✗"
+        cells[int(match.group(1))] = f"{numbers} {mark}"
+    return cells
+
+
+def seeds_table(documents: Mapping[str, Mapping[str, Any]], mode: bool = False) -> list[str]:
+    """A Markdown table, a row per agent and seed, a column per map (``—`` where that agent
+    or seed was not evaluated there); with ``mode``, of the deployed policies."""
+    tasks = list(dict.fromkeys(document["task"] for document in documents.values()))
+    rows: dict[tuple[str, int], dict[str, str]] = {}
+    for document in documents.values():
+        task = document["task"]
+        for agent, entry in document["agents"].items():
+            source = entry.get("mode") if mode else entry
+            if source is None:
+                continue
+            for seed, cell in seed_cells(source).items():
+                rows.setdefault((agent, seed), {})[task] = cell
+    lines = ["| agent, seed | " + " | ".join(tasks) + " |", "| --- " * (len(tasks) + 1) + "|"]
+    agents = list(dict.fromkeys(agent for agent, _ in rows))
+    for agent in agents:
+        for seed in sorted(seed for a, seed in rows if a == agent):
+            cells = [rows[agent, seed].get(task, "—") for task in tasks]
+            lines.append(f"| {agent} seed {seed} | " + " | ".join(cells) + " |")
+    return lines
+
+
+def seeds_markdown(documents: Mapping[str, Mapping[str, Any]]) -> str:
+    """``seeds.md``: the sampled policies' table and, where evaluated, the deployed ones'.
+
+    Raises:
+        ValueError: the documents differ in thresholds or evaluation (one table, one setting).
+    """
+    first = next(iter(documents.values()))
+    thresholds, settings = first["thresholds"], first["settings"]
+    for name, document in documents.items():
+        theirs = document["settings"]
+        if document["thresholds"] != thresholds or any(
+                theirs[key] != settings[key] for key in ("episodes", "eval_seed", "obs")):
+            raise ValueError(f"{name}.json was evaluated with other thresholds or episodes "
+                             f"than {next(iter(documents))}.json: no common table")
+    lines = [
+        "# Every seed", "",
+        f"Each cell is one training run: J_clane (dm, ≤ {thresholds['lane']}) / J_coll "
+        f"(collisions per episode, ≤ {thresholds['collision']}) / J_R (m per episode), over "
+        f"{settings['episodes']} evaluation episodes from spawn seed {settings['eval_seed']} "
+        "(never a training seed); ✓ where both constraints hold for that run, ✗ where one "
+        f"does not. Observation: `{settings['obs']}`. Written from "
+        + ", ".join(f"`{name}.json`" for name in documents)
+        + ", which give each table's command, budget and machine.", "",
+        "## The sampled policy (the one the constraints are learned for)", "",
+        *seeds_table(documents), ""]
+    if any("mode" in entry for document in documents.values()
+           for entry in document["agents"].values()):
+        lines += ["## The deployed policy (the most probable action, what `crllk.export` "
+                  "writes)", "", *seeds_table(documents, mode=True), ""]
+    return "\n".join(lines)
+
+
+def write_seeds(results: Path) -> Path | None:
+    """Writes ``<results>/seeds.md`` from the table documents there (none: nothing)."""
+    documents = table_documents(results)
+    if not documents:
+        return None
+    return atomic_write_text(results / "seeds.md", seeds_markdown(documents))
