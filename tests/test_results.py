@@ -49,11 +49,12 @@ def test_committed_seeds_are_what_the_code_writes(obs):
         table_documents(RESULTS / obs))
 
 
-def test_the_readme_quotes_every_seed_from_the_camera_as_committed():
-    """The README's per-seed tables from the camera are seeds.md's, character for character,
-    so no number in them was copied by hand."""
+@pytest.mark.parametrize("obs", ["pixels", "state"])
+def test_the_readme_quotes_every_seed_as_committed(obs):
+    """The README's per-seed tables are seeds.md's, character for character, so no number in
+    them was copied by hand."""
     readme = (REPO / "README.md").read_text()
-    tables = [block for block in (RESULTS / "pixels" / "seeds.md").read_text().split("\n\n")
+    tables = [block for block in (RESULTS / obs / "seeds.md").read_text().split("\n\n")
               if block.startswith("| agent, seed |")]
     assert len(tables) == 2
     for table in tables:
