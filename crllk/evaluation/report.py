@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 
 from crllk.envs.episodes import summarise
+from crllk.evaluation.intervals import metric_interval
 from crllk.rl.rollout import EvaluationResult
 from crllk.tasks.actions import DISCRETE_NAMES
 
@@ -35,6 +36,17 @@ def episode_cost(row: dict[str, Any], name: str) -> float:
     """Constraint ``name``'s value in one episode row of an ``eval.json`` (``cost_<name>``)."""
     key = f"cost_{name}"
     return float(row[key] if key in row else row[_OLDER_ROW_KEYS[name]])
+
+
+def constraint_intervals(document: dict[str, Any]) -> dict[str, list[float]]:
+    """``{metric: [low, high]}``, the 95 % confidence interval of each constraint's metric
+    from the document's episode rows (:func:`crllk.evaluation.intervals.metric_interval`;
+    empty where it has fewer than two episodes)."""
+    rows = document.get("episodes") or []
+    if len(rows) < 2:
+        return {}
+    return {c["metric"]: list(metric_interval([episode_cost(row, c["name"]) for row in rows]))
+            for c in constraint_entries(document)}
 
 
 def metrics(document: dict[str, Any]) -> list[str]:
@@ -117,7 +129,8 @@ def result_document(result: EvaluationResult, action: str, *, thresholds: dict[s
 
 def aggregate(documents: Sequence[dict[str, Any]]) -> dict[str, Any]:
     """Mean and standard deviation (population, ddof 0) across runs of each metric, with
-    the per-run values."""
+    the per-run values, and under ``"intervals"`` each run's 95 % confidence interval of each
+    constraint's metric (where every run kept its episodes)."""
     out: dict[str, Any] = {"runs": [d["source"].get("run_dir") for d in documents],
                            "constraints": constraint_entries(documents[0])}
     for metric in metrics(documents[0]):
@@ -125,6 +138,10 @@ def aggregate(documents: Sequence[dict[str, Any]]) -> dict[str, Any]:
         out[metric] = {"mean": float(np.mean(values)), "std": float(np.std(values)),
                        "values": values}
     out["satisfied"] = [bool(d["summary"]["satisfied"]) for d in documents]
+    intervals = [constraint_intervals(d) for d in documents]
+    if all(intervals):
+        out["intervals"] = {c["metric"]: [i[c["metric"]] for i in intervals]
+                            for c in out["constraints"]}
     return out
 
 
@@ -134,7 +151,8 @@ def format_summary(document: dict[str, Any]) -> str:
     constraints = constraint_entries(document)
     verdict = "every constraint holds" if s["satisfied"] else "constraints violated"
     text = (f"{name}: {document['evaluation']['episodes']} episodes: J_R {s['J_R']:.2f} m, "
-            f"{_metrics_text(s, constraints)}, length {s['episode_length']:.0f}: {verdict}")
+            f"{_metrics_text(s, constraints, constraint_intervals(document))}, "
+            f"length {s['episode_length']:.0f}: {verdict}")
     split = document.get("breakdown", {})
     for direction, row in split.get("by_direction", {}).items():
         text += (f"\n  started {direction}: {row['episodes']} episodes, "
@@ -154,5 +172,14 @@ def format_aggregate(result: dict[str, Any]) -> str:
     return f"{len(result['runs'])} runs: J_R {show('J_R', 2)} m, {metrics}"
 
 
-def _metrics_text(values: dict[str, Any], constraints: Sequence[dict[str, Any]]) -> str:
-    return ", ".join(f"{c['metric']} {values[c['metric']]:.3f} {c['unit']}" for c in constraints)
+def _metrics_text(values: dict[str, Any], constraints: Sequence[dict[str, Any]],
+                  intervals: dict[str, list[float]] | None = None) -> str:
+    """``J_clane 0.399 dm, ...``; with ``intervals``, each followed by its 95 % interval."""
+    def interval(metric: str) -> str:
+        if not intervals or metric not in intervals:
+            return ""
+        low, high = intervals[metric]
+        return f" (95 % interval {low:.3f}–{high:.3f})"
+
+    return ", ".join(f"{c['metric']} {values[c['metric']]:.3f} {c['unit']}{interval(c['metric'])}"
+                     for c in constraints)

@@ -25,6 +25,9 @@ PER_SEED_METRICS = (("J_clane", 3), ("J_coll", 2), ("J_R", 2))
 """The three numbers of a cell, with their decimals: lane deviation (dm), collisions per
 episode, travel (m)."""
 
+INTERVAL_DIGITS = 2
+"""Decimals of the confidence intervals in a cell."""
+
 
 def table_documents(results: Path) -> dict[str, dict[str, Any]]:
     """The table documents of one observation's results folder, by name (``table1``,
@@ -39,16 +42,23 @@ def table_documents(results: Path) -> dict[str, dict[str, Any]]:
 def seed_cells(entry: Mapping[str, Any]) -> dict[int, str]:
     """``{seed: "J_clane / J_coll / J_R ✓"}`` of one agent's evaluations (an agent's entry of
     a table document, or its ``"mode"``): ✓ where every constraint held for that seed, ✗
-    where one did not."""
+    where one did not; each constraint's 95 % confidence interval in brackets where the entry
+    has them (:func:`crllk.evaluation.report.aggregate`)."""
+    intervals = entry.get("intervals", {})
     cells = {}
     for index, run in enumerate(entry["runs"]):
         match = SEED_OF_RUN.search(run)
         if match is None:
             raise ValueError(f"run directory {run!r} does not end in -seed<N>")
-        numbers = " / ".join(f"{entry[metric]['values'][index]:.{digits}f}"
-                             for metric, digits in PER_SEED_METRICS)
+        numbers = []
+        for metric, digits in PER_SEED_METRICS:
+            number = f"{entry[metric]['values'][index]:.{digits}f}"
+            if metric in intervals:
+                low, high = intervals[metric][index]
+                number += f" ({low:.{INTERVAL_DIGITS}f}–{high:.{INTERVAL_DIGITS}f})"
+            numbers.append(number)
         mark = "✓" if entry["satisfied"][index] else "✗"
-        cells[int(match.group(1))] = f"{numbers} {mark}"
+        cells[int(match.group(1))] = f"{' / '.join(numbers)} {mark}"
     return cells
 
 
@@ -94,7 +104,11 @@ def seeds_markdown(documents: Mapping[str, Mapping[str, Any]]) -> str:
         f"(collisions per episode, ≤ {thresholds['collision']}) / J_R (m per episode), over "
         f"{settings['episodes']} evaluation episodes from spawn seed {settings['eval_seed']} "
         "(never a training seed); ✓ where both constraints hold for that run, ✗ where one "
-        f"does not. Observation: `{settings['obs']}`. Written from "
+        "does not (judged on the numbers themselves). In brackets, where the tables keep them, "
+        "the 95 % confidence interval of each constraint's metric over the run's episodes "
+        "(Wilson's for J_coll, the fraction of episodes that end on a collision; the normal "
+        "interval of the mean for J_clane): how far the episodes pin the number down. "
+        f"Observation: `{settings['obs']}`. Written from "
         + ", ".join(f"`{name}.json`" for name in documents)
         + ", which give each table's command, budget and machine.", "",
         "## The sampled policy (the one the constraints are learned for)", "",
