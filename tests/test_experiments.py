@@ -4,6 +4,7 @@ figures written from their JSON; a second invocation reuses the finished runs.""
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -70,8 +71,10 @@ def test_every_seed_is_written_beside_the_tables(tiny_experiments):
     assert "| agent, seed | small_loop | zigzag | obstacle_loop |" in markdown
     summary = read_eval_json(runs / "zigzag" / "PPO-C-a0.5-seed0")["summary"]
     row = next(line for line in markdown.splitlines() if line.startswith("| PPO-C seed 0 |"))
-    assert row.split(" | ")[2].startswith(
+    cell = row.split(" | ")[2]  # zigzag's: each constraint's number, then its interval
+    assert re.sub(r" \([^)]*\)", "", cell).startswith(
         f"{summary['J_clane']:.3f} / {summary['J_coll']:.2f} / {summary['J_R']:.2f} ")
+    assert cell.count("–") == 2
     assert "## The deployed policy" in markdown
 
 
