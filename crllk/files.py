@@ -32,7 +32,7 @@ def _umask() -> int:
     return mask
 
 
-def atomic_write(path: str | Path, write: Callable[[IO[bytes]], None]) -> Path:
+def atomic_write(path: str | Path, write: Callable[[IO[bytes]], object]) -> Path:
     """Calls ``write(file)`` on a temporary file beside ``path``, then renames it to ``path``;
     then removes what killed writes of ``path`` left (:func:`remove_leftovers`)."""
     path = Path(path)

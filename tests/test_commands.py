@@ -99,6 +99,59 @@ def test_bench_worker_figures(capsys):
     assert "main process, state: policy forward on 2 observations" in printed
 
 
+TINY_TRAINING = ["obs=state", "num_envs=2", "rollout_steps=4", "ppo.minibatch_size=4",
+                 "ppo.epochs=1", "task.horizon=12", "eval.num_envs=1"]
+"""Trainer overrides small enough for a benchmark's smoke run."""
+
+
+def test_bench_live_measures_both_blocks(capsys):
+    """`python -m crllk.bench.live` at a tiny budget: one block with the live view off, one
+    with it served on a free port, and both ratios."""
+    from crllk.bench import live
+
+    live.main(["--iterations", "1", "--repetitions", "1", *TINY_TRAINING])
+    printed = capsys.readouterr().out
+    off, on = (line for line in printed.splitlines() if line.startswith("frames/s, live view"))
+    assert float(off.split()[-1]) > 0 and float(on.split()[-1]) > 0
+    assert "per wall time, median on / off" in printed and "per CPU time" in printed
+
+
+@pytest.mark.parametrize(("args", "message"), [
+    (["--iterations", "0"], "--iterations: must be at least 1, got 0"),
+    (["obs=camera"], "obs: unknown choice 'camera'"),
+])
+def test_bench_live_bad_input_is_one_line(args, message):
+    done = subprocess.run([sys.executable, "-m", "crllk.bench.live", *args],
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 2, done.stderr[-2000:]
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1 and message in lines[0], done.stderr
+    assert "Traceback" not in done.stderr
+
+
+def test_bench_envs_prints_each_batch_size(capsys):
+    """`python -m crllk.bench.envs` at a tiny budget: a row per observation and batch size,
+    each with its bound, ratio and verdict."""
+    from crllk.bench import envs
+
+    envs.main(["--steps", "3", "--num-envs", "1", "2", "--observations", "state"])
+    rows = [line for line in capsys.readouterr().out.splitlines()
+            if line.startswith("make_env state")]
+    assert [row.split()[2] for row in rows] == ["num_envs=1", "num_envs=2"]
+    assert all(row.endswith(("met", "MISSED")) and float(row.split()[3]) > 0 for row in rows)
+
+
+@pytest.mark.parametrize(("args", "message"), [
+    (["--task", "nowhere"], "nowhere: task: unknown task"),
+    (["--steps", "0"], "--steps: must be at least 1, got 0"),
+])
+def test_bench_envs_bad_input_is_one_line(args, message):
+    done = subprocess.run([sys.executable, "-m", "crllk.bench.envs", *args],
+                          capture_output=True, text=True, timeout=300)
+    lines = done.stderr.strip().splitlines()
+    assert done.returncode == 2 and len(lines) == 1 and message in lines[0], done.stderr
+
+
 def test_rendering_processes_exit_without_egl_noise():
     """Renderers are closed before EGL is terminated: no "Exception ignored" at exit."""
     probe = ("import crllk; env = crllk.load('small_loop', observation='pixels'); "

@@ -50,7 +50,7 @@ def camera_strip(frames: Sequence[np.ndarray], scale: int = 6) -> Image.Image:
     h, w = frames[0].shape[:2]
     strip = Image.new("RGB", (len(frames) * (w * scale + gap) - gap, h * scale), (255, 255, 255))
     for k, frame in enumerate(frames):
-        big = Image.fromarray(frame).resize((w * scale, h * scale), Image.NEAREST)
+        big = Image.fromarray(frame).resize((w * scale, h * scale), Image.Resampling.NEAREST)
         strip.paste(big, (k * (w * scale + gap), 0))
     return strip
 

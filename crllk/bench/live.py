@@ -101,8 +101,9 @@ def live_cost(config: TrainConfig, iterations: int, repetitions: int, viewer: bo
             if process is not None:
                 stop_viewer(process)
     env.close()
-    (off, cpu_off), (on, cpu_on) = (tuple(zip(*rates[key], strict=True)) for key in (False, True))
-    return LiveCost(off, on, cpu_off, cpu_on)
+    (off, cpu_off), (with_live, cpu_on) = (tuple(zip(*rates[key], strict=True))
+                                           for key in (False, True))
+    return LiveCost(off, with_live, cpu_off, cpu_on)
 
 
 def _evaluation_recording(config: TrainConfig, learner: Learner, path: Path) -> Path:
@@ -121,8 +122,6 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser.add_argument("overrides", nargs="*", default=["obs=state"],
                         help="trainer overrides (default: obs=state)")
     args = parser.parse_args(argv)
-    if args.iterations < 1 or args.repetitions < 1:
-        parser.error("--iterations and --repetitions must be at least 1")
     config = bench_config(args.overrides)
     result = live_cost(config, args.iterations, args.repetitions, args.viewer)
     print(f"frames/s, live view off: {' '.join(f'{r:.0f}' for r in result.off)}")

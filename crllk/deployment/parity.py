@@ -45,7 +45,8 @@ def pilot_parity(pilot: Pilot, task: str, frames: int = 900, seed: int = 0,
     same, differences = 0, []
     for _ in range(frames):
         if step.first():
-            pilot.reset(), simulated.reset()
+            pilot.reset()
+            simulated.reset()
         observation = step.observation["pixels"]
         prepared = robot_camera_image(env.physics.render_camera, pilot.observation_shape[:2],
                                       quality)
