@@ -102,6 +102,21 @@ def test_seed_cells_and_table_worked_example():
         seed_cells(_entry(["r/CRLLK-D"], [0.1], [0.0], [2.0], [True]))
 
 
+def test_tables_of_other_settings_leave_seeds_md_alone(tmp_path, capsys):
+    """A table evaluated with other episodes than the others: a one-line warning, no
+    seeds.md, no traceback."""
+    from crllk.experiments.seeds import write_seeds
+
+    entry = _entry(["r/CRLLK-D-a0.5-seed0"], [0.1], [0.0], [2.0], [True])
+    for name, task, episodes in (("table1", "small_loop", 100), ("table_zigzag", "zigzag", 50)):
+        document = {"task": task, "agents": {"CRLLK-D": entry}, "thresholds": {"lane": 0.5},
+                    "settings": {"episodes": episodes, "eval_seed": 1, "obs": "pixels"}}
+        (tmp_path / f"{name}.json").write_text(json.dumps(document))
+    assert write_seeds(tmp_path) is None and not (tmp_path / "seeds.md").exists()
+    warning = capsys.readouterr().err.strip().splitlines()
+    assert len(warning) == 1 and "table_zigzag.json was evaluated with other" in warning[0]
+
+
 def test_a_second_invocation_reuses_finished_runs(tiny_experiments, tmp_path):
     """The table says what its invocation did: the first trained its four runs, the second
     trained and evaluated nothing."""

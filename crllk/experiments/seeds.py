@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import re
+import sys
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -121,8 +122,15 @@ def seeds_markdown(documents: Mapping[str, Mapping[str, Any]]) -> str:
 
 
 def write_seeds(results: Path) -> Path | None:
-    """Writes ``<results>/seeds.md`` from the table documents there (none: nothing)."""
+    """Writes ``<results>/seeds.md`` from the table documents there (none: nothing). Tables
+    evaluated with other settings than the others (``--episodes``, ``--seeds``...) have no
+    common table: a one-line warning, and the table just written stands alone."""
     documents = table_documents(results)
     if not documents:
         return None
-    return atomic_write_text(results / "seeds.md", seeds_markdown(documents))
+    try:
+        markdown = seeds_markdown(documents)
+    except ValueError as err:
+        print(f"warning: {results / 'seeds.md'} not written: {err}", file=sys.stderr)
+        return None
+    return atomic_write_text(results / "seeds.md", markdown)
