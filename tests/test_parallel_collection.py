@@ -47,3 +47,14 @@ def test_workers_that_do_not_divide_num_envs_are_refused(tmp_path):
     assert message == ("override: workers: must divide num_envs (2) into equal shares, "
                        "got 3"), message
     assert not (tmp_path / "run").exists()
+
+
+def test_two_workers_train_from_pixels_exactly_as_one_process(tmp_path):
+    """The default path from the camera (obs=pixels puts the simulations in two worker
+    processes): a workers=2 run equals the one-process run, metrics and checkpoint, bit for
+    bit (the workers render the same images as the main process would)."""
+    pixels = [f"num_envs={NUM_ENVS}", f"rollout_steps={ROLLOUT}", "obs=pixels",
+              "eval.final=false", "ppo.anneal_lr=false", "threads=1"]
+    two = run_in_process(tmp_path / "two", 2, [*pixels, "workers=2"], frames_per_iteration=FRAMES)
+    one = run_in_process(tmp_path / "one", 2, [*pixels, "workers=1"], frames_per_iteration=FRAMES)
+    assert_same_runs(one, two, 2, ignore=["workers"])

@@ -18,9 +18,10 @@ NUM_ENVS, ROLLOUT = 2, 8
 FRAMES_PER_ITERATION = NUM_ENVS * ROLLOUT
 TINY = [f"num_envs={NUM_ENVS}", f"rollout_steps={ROLLOUT}", "ppo.minibatch_size=8",
         "ppo.epochs=2", "task.horizon=12", "progress=false", "checkpoint_every=1",
-        "eval.episodes=4", "eval.num_envs=2"]
+        "eval.episodes=4", "eval.num_envs=2", "workers=1"]
 """Overrides of a tiny run; its evaluations play 4 episodes (the default 100 from pixels cost
-a test 5–15 s each)."""
+a test 5–15 s each), and its two simulations step in the test's process (two worker processes
+take about 5 s to start; ``tests/test_parallel_collection.py`` tests them)."""
 
 
 def run_in_process(run_dir: Path, iterations: int, extra: list[str] = (), *,

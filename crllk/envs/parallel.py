@@ -1,11 +1,18 @@
-"""The simulations of one training run stepped in several processes, behind one ``EnvBase``.
+"""The simulations of one run stepped in several processes, behind one ``EnvBase``.
 
-:class:`ParallelLaneKeepingEnv` runs TorchRL's :class:`~torchrl.envs.ParallelEnv` (spawned
-worker processes, shared-memory buffers) over ``W`` :class:`~crllk.envs.batched.
-BatchedLaneKeepingEnv` workers of ``n`` simulations each, and presents them as one env of batch
-size ``[W * n]``: simulation ``w * n + j`` is simulation ``j`` of worker ``w``. Its tensordicts
-have the keys and layout of a one-process env of ``W * n`` simulations, so the policy, the
-episode statistics and the PPO update do not see the difference.
+:class:`ParallelLaneKeepingEnv` starts ``W`` worker processes (spawned), each holding a
+:class:`~crllk.envs.batched.BatchedLaneKeepingEnv` of ``n`` simulations, and presents them as
+one env of batch size ``[W * n]``: simulation ``w * n + j`` is simulation ``j`` of worker
+``w``. Its tensordicts have the keys and layout of a one-process env of ``W * n`` simulations,
+so the policy, the episode statistics and the PPO update do not see the difference.
+
+Each worker is driven through its own pipe: a step sends it its slice of the actions and
+*blocks* until every worker has answered with its outputs (plain numpy arrays, a few KB per
+simulation). Nothing polls: on a two-core machine a parent spin-waiting on shared-memory flags
+(as TorchRL's ``ParallelEnv`` does) takes one core from the two workers and leaves pixel
+collection slower with two workers than with one. The workers rasterise on their own thread
+(:data:`WORKER_ENVIRONMENT`): with several processes drawing at once, llvmpipe's extra threads
+only add hand-offs.
 
 Workers are built by a picklable factory (a module-level function and its keyword arguments per
 worker). :meth:`~ParallelLaneKeepingEnv.sim_state` gathers the workers' snapshots into the one
@@ -15,12 +22,18 @@ snapshot a one-process env would take (:func:`~crllk.envs.batched.merge_sim_stat
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+import multiprocessing
+import os
+import traceback
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager, suppress
+from multiprocessing.connection import Connection
 from typing import Any
 
+import numpy as np
 import torch
 from tensordict import TensorDict, TensorDictBase
-from torchrl.envs import EnvBase, ParallelEnv
+from torchrl.envs import EnvBase
 
 from crllk.envs.batched import (
     BatchedLaneKeepingEnv,
@@ -28,6 +41,17 @@ from crllk.envs.batched import (
     merge_sim_states,
     split_sim_state,
 )
+from crllk.errors import ConfigError, MapError
+
+WORKER_ENVIRONMENT = {"LP_NUM_THREADS": "0"}
+"""Environment variables of the worker processes: llvmpipe rasterises on the calling thread
+(each worker already has a core of its own)."""
+CLOSE_TIMEOUT_S = 10.0
+"""How long a worker may take to release its renderers and exit before it is terminated (s)."""
+
+
+class WorkerError(RuntimeError):
+    """A worker process failed (its traceback is in the message) or exited."""
 
 
 class ParallelLaneKeepingEnv(MirroredTeacherFlag, EnvBase):
@@ -39,8 +63,8 @@ class ParallelLaneKeepingEnv(MirroredTeacherFlag, EnvBase):
         create_env_fn: a module-level function (spawned workers import it) returning a
             :class:`BatchedLaneKeepingEnv`.
         worker_kwargs: its keyword arguments, one mapping per worker.
-        num_threads: torch threads of this process (TorchRL would otherwise lower them by one
-            per worker); each worker runs with one.
+        num_threads: torch threads of this process (None: unchanged); each worker runs with
+            one.
 
     The workers are daemonic: they end with this process even if :meth:`close` is never
     called (a run that fails half-way).
@@ -51,49 +75,100 @@ class ParallelLaneKeepingEnv(MirroredTeacherFlag, EnvBase):
         workers = len(worker_kwargs)
         if workers < 1:
             raise ValueError("at least one worker is needed")
-        # Building the metadata env and starting the workers must not move this process's
-        # random generator: the policy's samples then match a one-process run.
-        with torch.random.fork_rng():
-            parallel = ParallelEnv(workers, create_env_fn, create_env_kwargs=list(worker_kwargs),
-                                   mp_start_method="spawn", num_threads=num_threads,
-                                   daemon=True)
-            parallel.start()
-        w, n = parallel.batch_size
-        super().__init__(device="cpu", batch_size=torch.Size([w * n]))
-        self.parallel = parallel
-        self.workers, self.per_worker, self.num_envs = w, n, w * n
-        self.config = parallel.config()[0]
+        if num_threads is not None:
+            torch.set_num_threads(num_threads)
+        self._pipes: list[Connection] = []
+        self._processes: list[multiprocessing.process.BaseProcess] = []
+        context = multiprocessing.get_context("spawn")
+        with _environment(WORKER_ENVIRONMENT):
+            for kwargs in worker_kwargs:
+                parent, child = context.Pipe()
+                process = context.Process(target=_serve, args=(child, create_env_fn, kwargs),
+                                          daemon=True)
+                process.start()
+                child.close()
+                self._pipes.append(parent)
+                self._processes.append(process)
+        infos = self._gather()
+        per_worker = infos[0]["num_envs"]
+        if any(info["num_envs"] != per_worker for info in infos):
+            self._stop()
+            raise ValueError("every worker must hold as many simulations")
+        super().__init__(device="cpu", batch_size=torch.Size([workers * per_worker]))
+        self.workers, self.per_worker, self.num_envs = workers, per_worker, workers * per_worker
+        first = infos[0]
+        self.config = first["config"]
         """The task's :class:`~crllk.tasks.config.TaskConfig` (the workers')."""
         self.constraints = self.config.constraints
         self.cost_keys = tuple(c.cost_key for c in self.constraints)
-        self._teacher_active = bool(parallel.teacher_active()[0])
+        self._teacher_active = bool(first["teacher_active"])
         flat = torch.Size([self.num_envs])
-        self.observation_spec = _flatten(parallel.observation_spec, flat)
-        self.action_spec = _flatten(parallel.action_spec, flat)
-        self.reward_spec = _flatten(parallel.reward_spec, flat)
-        self.done_spec = _flatten(parallel.done_spec, flat)
+        self.observation_spec = _flatten(first["observation_spec"], workers, flat)
+        self.action_spec = _flatten(first["action_spec"], workers, flat)
+        self.reward_spec = _flatten(first["reward_spec"], workers, flat)
+        self.done_spec = _flatten(first["done_spec"], workers, flat)
+        self._closed = False
 
-    # ----- the workers' settings ----------------------------------------------------------
+    # ----- talking to the workers ---------------------------------------------------------
+    def _gather(self) -> list[Any]:
+        """Every worker's answer to the last command (blocking), in worker order.
+
+        Raises:
+            ConfigError: bad input a worker found (a task or map file), as it was raised there.
+            WorkerError: with the first failing worker's traceback, or if one exited.
+        """
+        answers: list[Any] = []
+        failure: Exception | None = None
+        for index, pipe in enumerate(self._pipes):
+            try:
+                status, value = pipe.recv()
+            except (EOFError, OSError):
+                status, value = "error", "the process exited"
+            if status == "config_error" and failure is None:
+                kind, source, field, problem = value
+                failure = kind(source, field, problem)
+            elif status == "error" and failure is None:
+                failure = WorkerError(f"simulation worker {index} failed: {value}")
+            answers.append(value)
+        if failure is not None:
+            raise failure
+        return answers
+
+    def _call(self, name: str, arguments: Sequence[Sequence[Any]] | None = None) -> list[Any]:
+        """Method ``name`` of every worker's env, worker ``w`` with ``arguments[w]`` (none
+        without), or the attribute ``name``; their results in worker order."""
+        for index, pipe in enumerate(self._pipes):
+            pipe.send(("call", (name, () if arguments is None else tuple(arguments[index]))))
+        return self._gather()
+
     def _send_teacher_active(self, active: bool) -> None:
-        self.parallel.set_teacher_active(active)
+        self._call("set_teacher_active", [[active]] * self.workers)
 
     @property
     def seeds(self) -> list[int]:
         """The spawn seed of each simulation, in order."""
-        return [seed for worker in self.parallel.seeds() for seed in worker]
+        return [seed for worker in self._call("seeds") for seed in worker]
 
     # ----- reset and step -----------------------------------------------------------------
     def _reset(self, tensordict: TensorDictBase | None = None, **kwargs: Any) -> TensorDictBase:
         mask = None if tensordict is None else tensordict.get("_reset", None)
-        inner = None
-        if mask is not None:
-            inner = TensorDict({"_reset": mask.reshape(self.workers, self.per_worker, 1)},
-                               batch_size=self.parallel.batch_size)
-        return self.parallel.reset(inner).reshape(self.num_envs)
+        masks = (None if mask is None
+                 else mask.reshape(self.workers, self.per_worker).numpy())
+        for index, pipe in enumerate(self._pipes):
+            pipe.send(("reset", None if masks is None else masks[index]))
+        return self._joined(self._gather())
 
     def _step(self, tensordict: TensorDictBase) -> TensorDictBase:
-        actions = tensordict.select(*self.action_keys).reshape(self.workers, self.per_worker)
-        return self.parallel.step(actions).get("next").reshape(self.num_envs)
+        actions = tensordict.get("action").detach().cpu().numpy()
+        for pipe, share in zip(self._pipes, np.split(actions, self.workers), strict=True):
+            pipe.send(("step", share))
+        return self._joined(self._gather())
+
+    def _joined(self, outputs: list[dict[str, np.ndarray]]) -> TensorDict:
+        """The workers' outputs as one tensordict of every simulation, in order."""
+        return TensorDict({key: torch.from_numpy(np.concatenate([out[key] for out in outputs]))
+                           for key in outputs[0]}, batch_size=self.batch_size,
+                          device=self.device)
 
     def _set_seed(self, seed: int | None) -> None:
         raise NotImplementedError("the workers' spawn seeds are set when they are built")
@@ -102,26 +177,110 @@ class ParallelLaneKeepingEnv(MirroredTeacherFlag, EnvBase):
     def sim_state(self) -> dict[str, Any]:
         """The workers' snapshots as one: what a one-process env of all the simulations would
         return (:meth:`BatchedLaneKeepingEnv.sim_state`)."""
-        return merge_sim_states(self.parallel.sim_state())
+        return merge_sim_states(self._call("sim_state"))
 
     def load_sim_state(self, state: dict[str, Any]) -> None:
         """Restores a :meth:`sim_state` (of this env or of a one-process env of as many
         simulations), each worker its slice."""
         parts = split_sim_state(state, [self.per_worker] * self.workers)
-        for index, part in enumerate(parts):
-            self.parallel[index].load_sim_state(part)
+        self._call("load_sim_state", [[part] for part in parts])
 
     # ----- teardown -----------------------------------------------------------------------
     def close(self, *, raise_if_closed: bool = True) -> None:
-        """Stops the worker processes (each releases its renderers)."""
-        if not self.parallel.is_closed:
-            self.parallel.close(raise_if_closed=raise_if_closed)
+        """Stops the worker processes (each releases its renderers first)."""
+        if not getattr(self, "_closed", True):
+            self._stop()
         super().close(raise_if_closed=raise_if_closed)
 
+    def _stop(self) -> None:
+        self._closed = True
+        for pipe in self._pipes:
+            with suppress(OSError):  # a worker that already exited
+                pipe.send(("close", None))
+        for process, pipe in zip(self._processes, self._pipes, strict=True):
+            process.join(CLOSE_TIMEOUT_S)
+            if process.is_alive():
+                process.terminate()
+                process.join()
+            pipe.close()
 
-def _flatten(spec: Any, shape: torch.Size) -> Any:
-    """``spec`` of batch ``[W, n, ...]`` as batch ``[W * n, ...]``."""
-    return spec.reshape(*shape, *spec.shape[2:])
+
+def _serve(pipe: Connection, create_env_fn: Callable[..., BatchedLaneKeepingEnv],
+           kwargs: dict[str, Any]) -> None:
+    """A worker: builds its env, reports what the parent needs to know of it, then answers
+    commands until ``close`` (or until the parent goes away)."""
+    torch.set_num_threads(1)
+    try:
+        env = create_env_fn(**kwargs)
+        pipe.send(("ok", {"num_envs": env.num_envs, "config": env.config,
+                          "teacher_active": env.teacher_active,
+                          "observation_spec": env.observation_spec,
+                          "action_spec": env.action_spec, "reward_spec": env.reward_spec,
+                          "done_spec": env.done_spec}))
+    except BaseException as error:  # reported to the parent, which raises
+        pipe.send(_failure(error))
+        return
+    batch = env.batch_size
+    try:
+        while True:
+            try:
+                command, argument = pipe.recv()
+            except EOFError:
+                return
+            if command == "close":
+                return
+            try:
+                if command == "step":
+                    action = TensorDict({"action": torch.from_numpy(argument)}, batch_size=batch)
+                    answer: Any = _arrays(env._step(action))
+                elif command == "reset":
+                    mask = (None if argument is None else TensorDict(
+                        {"_reset": torch.from_numpy(argument).reshape(-1, 1)}, batch_size=batch))
+                    answer = _arrays(env._reset(mask))
+                else:
+                    name, arguments = argument
+                    attribute = getattr(env, name)
+                    answer = attribute(*arguments) if callable(attribute) else attribute
+            except Exception as error:  # reported to the parent, which raises
+                pipe.send(_failure(error))
+            else:
+                pipe.send(("ok", answer))
+    finally:
+        env.close()
 
 
-__all__ = ["ParallelLaneKeepingEnv"]
+def _failure(error: BaseException) -> tuple[str, Any]:
+    """What a worker sends for ``error``: bad input as its parts (the parent raises it again,
+    one line for the user), anything else as its traceback."""
+    if isinstance(error, ConfigError):
+        kind = type(error) if type(error) in (ConfigError, MapError) else ConfigError
+        return "config_error", (kind, error.source, error.field, error.problem)
+    return "error", traceback.format_exc()
+
+
+def _arrays(tensordict: TensorDictBase) -> dict[str, np.ndarray]:
+    """A flat tensordict's entries as numpy arrays (what crosses the pipe)."""
+    return {key: value.numpy() for key, value in tensordict.items()}
+
+
+@contextmanager
+def _environment(values: dict[str, str]) -> Iterator[None]:
+    """``os.environ`` with ``values`` set while processes are started (they inherit it)."""
+    saved = {key: os.environ.get(key) for key in values}
+    os.environ.update(values)
+    try:
+        yield
+    finally:
+        for key, value in saved.items():
+            if value is None:
+                os.environ.pop(key, None)
+            else:
+                os.environ[key] = value
+
+
+def _flatten(spec: Any, workers: int, shape: torch.Size) -> Any:
+    """A worker's ``spec`` of batch ``[n, ...]`` as the batch ``[workers * n, ...]``."""
+    return spec.expand(workers, *spec.shape).reshape(*shape, *spec.shape[1:])
+
+
+__all__ = ["ParallelLaneKeepingEnv", "WorkerError"]

@@ -18,6 +18,7 @@ from dm_control.mujoco.wrapper import MjModel
 from crllk.images import box_average
 from crllk.maps import DuckietownMap
 from crllk.sim import constants as C
+from crllk.sim.culling import FrustumCuller, cullable, hidden_geoms
 from crllk.sim.motor import MotorConfig, clip_duty
 from crllk.sim.scene import compile_scene
 from crllk.sim.variation import (
@@ -86,6 +87,8 @@ _WARNING_NAMES = tuple(mujoco.mjtWarning.__members__)[:mujoco.mjtWarning.mjNWARN
 """MuJoCo's warning kinds, in the order of ``data.warning``."""
 
 _RK4 = int(mujoco.mjtIntegrator.mjINT_RK4)
+_NONE = np.zeros(0, dtype=int)
+"""No geom ids."""
 
 _FULL_STATE = mujoco.mjtState.mjSTATE_INTEGRATION
 """Everything ``mj_step`` reads: time, qpos, qvel, act, the actuators' delay history,
@@ -133,9 +136,17 @@ class Physics(dm_mujoco.Physics):
         """Whether the last :meth:`step` diverged (the state was reset)."""
         self._renderers: dict[tuple[int, int], mujoco.Renderer] = {}
         weakref.finalize(self, _close_renderers, self._renderers)
+        self._cullers: dict[tuple[str, int, int], FrustumCuller | None] = {}
+        """Per camera and image size: what leaves out the geoms it cannot see (None: a
+        camera :func:`crllk.sim.culling.cullable` does not handle)."""
         self._obstacle_geoms = np.array(
             [i for i in range(self.model.ngeom)
              if (self.model.id2name(i, "geom") or "").startswith(C.OBSTACLE_PREFIX)], dtype=int)
+        self._distractor_geoms = np.array(
+            [i for i in range(self.model.ngeom)
+             if (self.model.id2name(i, "geom") or "").startswith(C.DISTRACTOR_PREFIX)],
+            dtype=int)
+        """The distractor patches: scene variations resize them."""
         self._is_obstacle = np.zeros(self.model.ngeom, dtype=bool)
         self._is_obstacle[self._obstacle_geoms] = True
         self._footprint_geom = self.model.name2id(C.FOOTPRINT_GEOM, "geom")
@@ -281,7 +292,9 @@ class Physics(dm_mujoco.Physics):
     def render_camera(self, height: int, width: int, supersample: int = 1,
                       camera: str = C.CAMERA) -> np.ndarray:
         """RGB uint8 image (height, width, 3) from ``camera``, rendered ``supersample`` times
-        larger per axis and box-averaged down. One renderer per size is kept and reused."""
+        larger per axis and box-averaged down. One renderer per size is kept and reused; geoms
+        the camera cannot see are left out of its scene (:mod:`crllk.sim.culling`: the same
+        image, drawn faster)."""
         if self.variation is not None or self._model_variation["appearance"] is not None:
             self._use_variation("appearance", apply_appearance)
             mujoco.mj_camlight(self._mj_model, self._mj_data)  # the variation's camera and sun
@@ -294,11 +307,23 @@ class Physics(dm_mujoco.Physics):
             renderer = mujoco.Renderer(self.model.ptr, *size)
             self._renderers[size] = renderer
             _track(renderer)
-        renderer.update_scene(self.data.ptr, camera=camera)
+        culler = self._culler(camera, height, width)
+        outside = culler.outside(self._mj_data) if culler is not None else _NONE
+        with hidden_geoms(self._mj_model, outside):
+            renderer.update_scene(self._mj_data, camera=camera)
         image = renderer.render()
         if supersample == 1:
             return image.copy()
         return box_average(image, supersample)
+
+    def _culler(self, camera: str, height: int, width: int) -> FrustumCuller | None:
+        key = (camera, height, width)
+        if key not in self._cullers:
+            camera_id = self.model.name2id(camera, "camera")
+            self._cullers[key] = (FrustumCuller(self._mj_model, camera_id, width / height,
+                                                self._distractor_geoms)
+                                  if cullable(self._mj_model, camera_id) else None)
+        return self._cullers[key]
 
     def free_renderers(self) -> None:
         """Release the GL contexts of the kept renderers."""

@@ -58,7 +58,7 @@ TrainingEnv = BatchedLaneKeepingEnv | ParallelLaneKeepingEnv | RayLaneKeepingCol
 
 def build_training_env(config: TrainConfig) -> TrainingEnv:
     """The ``num_envs`` training simulations: stepped in this process (``workers=1``), split
-    among ``workers`` processes through TorchRL's ``ParallelEnv``, or among ``workers`` remote
+    among ``workers`` processes (:class:`ParallelLaneKeepingEnv`), or among ``workers`` remote
     collectors (``collector=ray``; started by :func:`build_run`). Simulation ``i`` spawns from
     the same seed every way.
 

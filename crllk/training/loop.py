@@ -24,7 +24,8 @@ from __future__ import annotations
 
 import sys
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -37,6 +38,7 @@ import crllk  # noqa: F401  (chooses the headless GL backend before torchrl impo
 from crllk.envs.batched import BatchedLaneKeepingEnv
 from crllk.envs.distributed import RayLaneKeepingCollector
 from crllk.envs.episodes import EpisodeAccumulator, EpisodeStats, summarise
+from crllk.envs.parallel import ParallelLaneKeepingEnv
 from crllk.errors import ConfigError
 from crllk.files import atomic_write_text
 from crllk.rl.lagrange import Multiplier
@@ -208,7 +210,22 @@ def collect_batch(env: TrainingEnv, actor: torch.nn.Module, carry: TensorDictBas
     ``carry``, or a batch of the remote collectors with the policy's current weights."""
     if isinstance(env, RayLaneKeepingCollector):
         return env.collect(actor, steps), None
+    if isinstance(env, ParallelLaneKeepingEnv):
+        with torch_threads(1):  # the worker processes hold the cores meanwhile
+            return collect(env, actor, carry, steps)
     return collect(env, actor, carry, steps)
+
+
+@contextmanager
+def torch_threads(count: int) -> Iterator[None]:
+    """Torch runs ``count`` CPU threads meanwhile: with simulation workers stepping on every
+    core, the policy's forward passes in more threads only spin against them."""
+    previous = torch.get_num_threads()
+    torch.set_num_threads(count)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(previous)
 
 
 def prepare_run_dir(config: TrainConfig, run_dir: Path, checkpoint_path: Path) -> bool:
