@@ -206,7 +206,8 @@ class TrainConfig:
     (num_envs/workers each, worker processes driven through pipes; the policy and the PPO
     update stay in the main process). Simulation i spawns from the same seed whatever the
     number of workers, so a run with several workers collects exactly what it would with one,
-    and resumes exactly from its checkpoints (with any number of workers). With collector=ray: the remote collectors."""
+    and resumes exactly from its checkpoints (with any number of workers). With collector=ray:
+    the remote collectors."""
     collector: str = setting("local", check=one_of("local", "ray"))
     """Where the simulations run. local: on this machine (workers processes). ray: in workers
     remote collectors of TorchRL's RayCollector (the cluster extra), num_envs/workers
