@@ -3,10 +3,14 @@ exact resume, and a clear refusal when num_envs does not split evenly."""
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 from tiny_runs import assert_same_runs, read_rows, run_in_process
 
 from crllk.errors import ConfigError
+from crllk.rl.rollout import run_episodes
+from crllk.training.build import build_eval_env
+from crllk.training.runs import load_actor, load_run_config
 
 NUM_ENVS, ROLLOUT = 2, 4
 SMALL = [f"num_envs={NUM_ENVS}", f"rollout_steps={ROLLOUT}", "obs=state", "eval.final=false",
@@ -58,3 +62,27 @@ def test_two_workers_train_from_pixels_exactly_as_one_process(tmp_path):
     two = run_in_process(tmp_path / "two", 2, [*pixels, "workers=2"], frames_per_iteration=FRAMES)
     one = run_in_process(tmp_path / "one", 2, [*pixels, "workers=1"], frames_per_iteration=FRAMES)
     assert_same_runs(one, two, 2, ignore=["workers"])
+
+
+def test_evaluation_in_two_workers_plays_the_same_episodes(tmp_path):
+    """A run's evaluation env follows its workers (build_eval_env): the same episodes, their
+    start directions, ends and actions as in one process, from the same spawn seed."""
+    run = run_in_process(tmp_path / "run", 1, ["obs=pixels", "eval.final=false", "threads=1"])
+    config = load_run_config(run)
+    results, kinds = [], []
+    for workers in (1, 2):
+        config.workers = workers
+        env = build_eval_env(config, num_envs=2, seed=5)
+        kinds.append(type(env).__name__)
+        try:
+            actor, _ = load_actor(run, env)
+            results.append(run_episodes(env, actor, 4, deterministic=False, sample_seed=5))
+        finally:
+            env.close()
+    assert kinds == ["BatchedLaneKeepingEnv", "ParallelLaneKeepingEnv"]
+    one, two = results
+    assert one.episodes == two.episodes
+    assert one.directions == two.directions and None not in one.directions
+    assert one.hit_objects == two.hit_objects and one.terminations == two.terminations
+    for a, b in zip(one.actions, two.actions, strict=True):
+        np.testing.assert_array_equal(a, b)

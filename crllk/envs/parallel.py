@@ -27,6 +27,7 @@ import os
 import traceback
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager, suppress
+from dataclasses import dataclass
 from multiprocessing.connection import Connection
 from typing import Any
 
@@ -48,6 +49,16 @@ WORKER_ENVIRONMENT = {"LP_NUM_THREADS": "0"}
 (each worker already has a core of its own)."""
 CLOSE_TIMEOUT_S = 10.0
 """How long a worker may take to release its renderers and exit before it is terminated (s)."""
+
+
+@dataclass
+class TaskView:
+    """What evaluation reads of a worker's task after each step (its episode's details)."""
+
+    start_direction: str | None = None
+    """The loop direction the episode started in (``"intended"``, ``"reverse"`` or None)."""
+    hit_object: int | None = None
+    """The map object the episode ended on (an index, or None)."""
 
 
 class WorkerError(RuntimeError):
@@ -107,6 +118,8 @@ class ParallelLaneKeepingEnv(MirroredTeacherFlag, EnvBase):
         self.action_spec = _flatten(first["action_spec"], workers, flat)
         self.reward_spec = _flatten(first["reward_spec"], workers, flat)
         self.done_spec = _flatten(first["done_spec"], workers, flat)
+        self.tasks = [TaskView() for _ in range(self.num_envs)]
+        """Each simulation's :class:`TaskView` as of the last step or reset."""
         self._closed = False
 
     # ----- talking to the workers ---------------------------------------------------------
@@ -164,10 +177,15 @@ class ParallelLaneKeepingEnv(MirroredTeacherFlag, EnvBase):
             pipe.send(("step", share))
         return self._joined(self._gather())
 
-    def _joined(self, outputs: list[dict[str, np.ndarray]]) -> TensorDict:
-        """The workers' outputs as one tensordict of every simulation, in order."""
-        return TensorDict({key: torch.from_numpy(np.concatenate([out[key] for out in outputs]))
-                           for key in outputs[0]}, batch_size=self.batch_size,
+    def _joined(self, outputs: list[tuple[dict[str, np.ndarray], list[tuple]]]) -> TensorDict:
+        """The workers' outputs as one tensordict of every simulation, in order; their tasks'
+        details into :attr:`tasks`."""
+        details = [detail for _, worker in outputs for detail in worker]
+        for view, (direction, hit) in zip(self.tasks, details, strict=True):
+            view.start_direction, view.hit_object = direction, hit
+        arrays = [out for out, _ in outputs]
+        return TensorDict({key: torch.from_numpy(np.concatenate([out[key] for out in arrays]))
+                           for key in arrays[0]}, batch_size=self.batch_size,
                           device=self.device)
 
     def _set_seed(self, seed: int | None) -> None:
@@ -232,11 +250,11 @@ def _serve(pipe: Connection, create_env_fn: Callable[..., BatchedLaneKeepingEnv]
             try:
                 if command == "step":
                     action = TensorDict({"action": torch.from_numpy(argument)}, batch_size=batch)
-                    answer: Any = _arrays(env._step(action))
+                    answer: Any = (_arrays(env._step(action)), _details(env))
                 elif command == "reset":
                     mask = (None if argument is None else TensorDict(
                         {"_reset": torch.from_numpy(argument).reshape(-1, 1)}, batch_size=batch))
-                    answer = _arrays(env._reset(mask))
+                    answer = (_arrays(env._reset(mask)), _details(env))
                 else:
                     name, arguments = argument
                     attribute = getattr(env, name)
@@ -256,6 +274,11 @@ def _failure(error: BaseException) -> tuple[str, Any]:
         kind = type(error) if type(error) in (ConfigError, MapError) else ConfigError
         return "config_error", (kind, error.source, error.field, error.problem)
     return "error", traceback.format_exc()
+
+
+def _details(env: BatchedLaneKeepingEnv) -> list[tuple[str | None, int | None]]:
+    """Each task's :class:`TaskView` fields (a few bytes per simulation)."""
+    return [(task.start_direction, task.hit_object) for task in env.tasks]
 
 
 def _arrays(tensordict: TensorDictBase) -> dict[str, np.ndarray]:
@@ -283,4 +306,4 @@ def _flatten(spec: Any, workers: int, shape: torch.Size) -> Any:
     return spec.expand(workers, *spec.shape).reshape(*shape, *spec.shape[1:])
 
 
-__all__ = ["ParallelLaneKeepingEnv", "WorkerError"]
+__all__ = ["ParallelLaneKeepingEnv", "TaskView", "WorkerError"]

@@ -15,7 +15,7 @@ from crllk.evaluation.report import result_document
 from crllk.files import atomic_write_text
 from crllk.rl.rollout import EvaluationResult, run_episodes
 from crllk.tasks.follower import FollowerGains, FollowerPolicy
-from crllk.training.build import build_env
+from crllk.training.build import build_env, build_eval_env
 from crllk.training.config import EVALUATION_SEED, TrainConfig, algo_thresholds
 from crllk.training.run_dir import EVAL_RECORDING
 from crllk.training.runs import EVAL_FILE, load_actor, load_run_config
@@ -36,7 +36,7 @@ def evaluate_run(run_dir: str | Path, *, episodes: int, deterministic: bool = Fa
     if overrides:
         config.task = OmegaConf.to_container(OmegaConf.merge(config.task, dict(overrides)))
     seed = config.eval.seed if seed is None else seed
-    env = build_env(config, num_envs=num_envs, seed=seed)
+    env = build_eval_env(config, num_envs=num_envs, seed=seed)
     try:
         actor, info = load_actor(run_dir, env)
         result = run_episodes(env, actor, episodes, deterministic=deterministic,

@@ -82,11 +82,30 @@ def build_training_env(config: TrainConfig) -> TrainingEnv:
     return ParallelLaneKeepingEnv(worker_env, shares, num_threads=config.threads)
 
 
-def worker_env(config: TrainConfig, first: int, count: int) -> BatchedLaneKeepingEnv:
-    """A worker's share of the training simulations: ``count`` of them from simulation
-    ``first``, each with the spawn seed it has in the one-process env (runs in the worker)."""
-    env = build_env(config, num_envs=count, seed=config.seed, training=True)
-    env.set_spawn_seeds(sub_env_seeds(config.seed, config.num_envs)[first:first + count])
+def build_eval_env(config: TrainConfig, *, num_envs: int,
+                   seed: int) -> BatchedLaneKeepingEnv | ParallelLaneKeepingEnv:
+    """An evaluation's environment (:func:`build_env`), split among the run's ``workers``
+    processes like its training simulations when they divide ``num_envs`` (and the run
+    collects locally); simulation ``i`` spawns from the same seed either way, so the episodes
+    are the same."""
+    workers = config.workers
+    if workers == 1 or config.collector != "local" or num_envs % workers:
+        return build_env(config, num_envs=num_envs, seed=seed)
+    share = num_envs // workers
+    shares = [{"config": config, "first": w * share, "count": share, "seed": seed,
+               "num_envs": num_envs, "training": False} for w in range(workers)]
+    return ParallelLaneKeepingEnv(worker_env, shares)
+
+
+def worker_env(config: TrainConfig, first: int, count: int, seed: int | None = None,
+               num_envs: int | None = None, training: bool = True) -> BatchedLaneKeepingEnv:
+    """A worker's share of the training simulations (or, with ``seed`` and ``num_envs``, of an
+    evaluation's): ``count`` of them from simulation ``first``, each with the spawn seed it has
+    in the one-process env (runs in the worker)."""
+    seed = config.seed if seed is None else seed
+    num_envs = config.num_envs if num_envs is None else num_envs
+    env = build_env(config, num_envs=count, seed=seed, training=training)
+    env.set_spawn_seeds(sub_env_seeds(seed, num_envs)[first:first + count])
     return env
 
 

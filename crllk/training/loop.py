@@ -44,7 +44,7 @@ from crllk.files import atomic_write_text
 from crllk.rl.lagrange import Multiplier
 from crllk.rl.rollout import EvaluationResult, collect, run_episodes
 from crllk.tasks.constraints import Constraint
-from crllk.training.build import Learner, TrainingEnv, build_env, build_run
+from crllk.training.build import Learner, TrainingEnv, build_env, build_eval_env, build_run
 from crllk.training.checkpoints import (
     POLICY_FILE,
     checkpoint_state,
@@ -143,7 +143,8 @@ def train(config: TrainConfig, on_final_evaluation: FinalEvaluation | None = Non
         periodic = bool(config.eval.every) and iteration % config.eval.every == 0
         if periodic or (config.eval.final and frames >= config.total_frames):
             if eval_env is None:
-                eval_env = build_env(config, num_envs=config.eval.num_envs, seed=config.eval.seed)
+                eval_env = build_eval_env(config, num_envs=config.eval.num_envs,
+                                          seed=config.eval.seed)
             row, result = evaluate(config, eval_env, learner, iteration, frames,
                                    time.perf_counter() - started)
             evaluations.append(row)
