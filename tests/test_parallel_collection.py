@@ -55,13 +55,20 @@ def test_workers_that_do_not_divide_num_envs_are_refused(tmp_path):
 
 def test_two_workers_train_from_pixels_exactly_as_one_process(tmp_path):
     """The default path from the camera (obs=pixels puts the simulations in two worker
-    processes): a workers=2 run equals the one-process run, metrics and checkpoint, bit for
-    bit (the workers render the same images as the main process would)."""
+    processes): a workers=2 run equals the one-process run, metrics, checkpoint and the
+    final evaluation (reseeded and played in the workers too), bit for bit (the workers
+    render the same images as the main process would)."""
     pixels = [f"num_envs={NUM_ENVS}", f"rollout_steps={ROLLOUT}", "obs=pixels",
-              "eval.final=false", "ppo.anneal_lr=false", "threads=1"]
+              "ppo.anneal_lr=false", "threads=1"]
     two = run_in_process(tmp_path / "two", 2, [*pixels, "workers=2"], frames_per_iteration=FRAMES)
     one = run_in_process(tmp_path / "one", 2, [*pixels, "workers=1"], frames_per_iteration=FRAMES)
     assert_same_runs(one, two, 2, ignore=["workers"])
+    evaluations = [read_rows(run / "eval.csv") for run in (one, two)]
+    assert len(evaluations[0]) == 1
+    for row in evaluations:
+        row[0].pop("evaluation_s")
+        row[0].pop("time_s")
+    assert evaluations[0] == evaluations[1]
 
 
 def test_evaluation_in_two_workers_plays_the_same_episodes(tmp_path):

@@ -41,6 +41,7 @@ from crllk.envs.batched import (
     MirroredTeacherFlag,
     merge_sim_states,
     split_sim_state,
+    sub_env_seeds,
 )
 from crllk.errors import ConfigError, MapError
 
@@ -189,7 +190,11 @@ class ParallelLaneKeepingEnv(MirroredTeacherFlag, EnvBase):
                           device=self.device)
 
     def _set_seed(self, seed: int | None) -> None:
-        raise NotImplementedError("the workers' spawn seeds are set when they are built")
+        """Reseed every simulation's spawn generator as a one-process env of as many
+        simulations would (:func:`sub_env_seeds`), each worker its slice."""
+        seeds = sub_env_seeds(seed, self.num_envs)
+        n = self.per_worker
+        self._call("set_spawn_seeds", [[seeds[w * n:(w + 1) * n]] for w in range(self.workers)])
 
     # ----- snapshots ----------------------------------------------------------------------
     def sim_state(self) -> dict[str, Any]:
