@@ -3,13 +3,18 @@ exact resume, and a clear refusal when num_envs does not split evenly."""
 
 from __future__ import annotations
 
+import multiprocessing
+
 import numpy as np
 import pytest
 from tiny_runs import assert_same_runs, read_rows, run_in_process
 
+from crllk.envs.parallel import ParallelLaneKeepingEnv, WorkerError
 from crllk.errors import ConfigError
 from crllk.rl.rollout import run_episodes
-from crllk.training.build import build_eval_env
+from crllk.training.build import build_eval_env, worker_env
+from crllk.training.compose import compose_config
+from crllk.training.config import validate
 from crllk.training.runs import load_actor, load_run_config
 
 NUM_ENVS, ROLLOUT = 2, 4
@@ -93,3 +98,17 @@ def test_evaluation_in_two_workers_plays_the_same_episodes(tmp_path):
     assert one.hit_objects == two.hit_objects and one.terminations == two.terminations
     for a, b in zip(one.actions, two.actions, strict=True):
         np.testing.assert_array_equal(a, b)
+
+
+def test_a_failing_worker_is_one_line_naming_it():
+    """A worker whose env cannot be built: the parent raises one line naming the worker and
+    the error, keeps the worker's traceback in the exception's notes, and stops the others."""
+    config = validate(compose_config(["obs=state", "num_envs=2"]))
+    shares = [{"config": config, "first": 0, "count": 1}, {"config": config, "first": 1,
+                                                           "count": 0}]
+    with pytest.raises(WorkerError) as error:
+        ParallelLaneKeepingEnv(worker_env, shares)
+    assert str(error.value) == ("simulation worker 1 failed: ValueError: num_envs must be at "
+                                "least 1, got 0")
+    assert "Traceback" in error.value.__notes__[0]
+    assert not multiprocessing.active_children()

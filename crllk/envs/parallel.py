@@ -48,6 +48,9 @@ from crllk.errors import ConfigError, MapError
 WORKER_ENVIRONMENT = {"LP_NUM_THREADS": "0"}
 """Environment variables of the worker processes: llvmpipe rasterises on the calling thread
 (each worker already has a core of its own)."""
+ANSWER_TIMEOUT_S = 600.0
+"""How long a worker may take to answer one command (s; starting takes the longest: imports of
+10–30 s on a loaded machine) before it is taken for hung."""
 CLOSE_TIMEOUT_S = 10.0
 """How long a worker may take to release its renderers and exit before it is terminated (s)."""
 
@@ -63,7 +66,8 @@ class TaskView:
 
 
 class WorkerError(RuntimeError):
-    """A worker process failed (its traceback is in the message) or exited."""
+    """A worker process failed (its error's last line in the message, its traceback in the
+    exception's notes), exited, or stopped answering."""
 
 
 class ParallelLaneKeepingEnv(MirroredTeacherFlag, EnvBase):
@@ -101,7 +105,11 @@ class ParallelLaneKeepingEnv(MirroredTeacherFlag, EnvBase):
                 child.close()
                 self._pipes.append(parent)
                 self._processes.append(process)
-        infos = self._gather()
+        try:
+            infos = self._gather()
+        except Exception:
+            self._stop()
+            raise
         per_worker = infos[0]["num_envs"]
         if any(info["num_envs"] != per_worker for info in infos):
             self._stop()
@@ -135,6 +143,10 @@ class ParallelLaneKeepingEnv(MirroredTeacherFlag, EnvBase):
         failure: Exception | None = None
         for index, pipe in enumerate(self._pipes):
             try:
+                if not pipe.poll(ANSWER_TIMEOUT_S):  # waits in the kernel, never spins
+                    self._stop()
+                    raise WorkerError(f"simulation worker {index} did not answer within "
+                                      f"{ANSWER_TIMEOUT_S:.0f} s")
                 status, value = pipe.recv()
             except (EOFError, OSError):
                 status, value = "error", "the process exited"
@@ -142,7 +154,9 @@ class ParallelLaneKeepingEnv(MirroredTeacherFlag, EnvBase):
                 kind, source, field, problem = value
                 failure = kind(source, field, problem)
             elif status == "error" and failure is None:
-                failure = WorkerError(f"simulation worker {index} failed: {value}")
+                lines = str(value).strip().splitlines() or ["?"]
+                failure = WorkerError(f"simulation worker {index} failed: {lines[-1]}")
+                failure.add_note(f"the worker's traceback:\n{value}")
             answers.append(value)
         if failure is not None:
             raise failure
