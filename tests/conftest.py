@@ -15,7 +15,7 @@ os.environ.setdefault("PYOPENGL_PLATFORM", os.environ["MUJOCO_GL"])
 
 
 TINY_EXPERIMENT = ["--frames", "16", "--seeds", "0", "--episodes", "2", "--jobs", "1",
-                   "--set", "num_envs=2",
+                   "--set", "num_envs=2", "workers=1",
                    "rollout_steps=8", "ppo.minibatch_size=8", "ppo.epochs=1", "task.horizon=12",
                    "eval.every=1", "eval.episodes=2", "eval.num_envs=10"]
 """``python -m crllk.experiments`` settings small enough for a test: one 16-frame run per agent,

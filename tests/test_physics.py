@@ -7,6 +7,9 @@ ground far from the map where no road check is involved.
 from __future__ import annotations
 
 import math
+import os
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -421,3 +424,16 @@ def test_freeing_an_older_simulation_leaves_the_camera_of_a_newer_one_intact():
         gc.collect()
         again = newer.physics.render_camera(30, 40, 2)
         np.testing.assert_array_equal(again, step.observation["pixels"])
+
+
+@pytest.mark.parametrize(("given", "expected"), [(None, "0"), ("3", "3")])
+def test_llvmpipe_draws_on_the_calling_thread_unless_the_user_says_otherwise(given, expected):
+    """``import crllk`` sets LP_NUM_THREADS=0 (Mesa's rasteriser without helper threads, read
+    when the first GL context is made) and keeps a value the user set."""
+    env = {k: v for k, v in os.environ.items() if k != "LP_NUM_THREADS"}
+    if given is not None:
+        env["LP_NUM_THREADS"] = given
+    probe = "import os, crllk; print(os.environ['LP_NUM_THREADS'])"
+    out = subprocess.run([sys.executable, "-c", probe], env=env, capture_output=True,
+                         text=True, check=True).stdout.strip()
+    assert out == expected
