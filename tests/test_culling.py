@@ -4,8 +4,6 @@ bounding radii with worked numbers; alphas restored exactly."""
 
 from __future__ import annotations
 
-import math
-
 import mujoco
 import numpy as np
 import pytest
@@ -84,11 +82,18 @@ def test_probes_in_view_are_kept_and_the_others_left_out():
     assert cullable(model, camera)
     outside = FrustumCuller(model, camera, aspect=1.0).outside(data)
     names = {model.geom(int(i)).name for i in outside}
-    assert names == {"behind", "left"}
-    # the edge sphere: centre 0.8 above the axis at 1 ahead, the view's top at tan(30°) = 0.577
-    top = math.tan(math.radians(30))
-    distance = (0.8 - top) * math.cos(math.radians(30))  # from the top plane, about 0.193
-    assert distance < 0.3 < distance + 0.2
+    assert names == {"behind", "left"}  # the edge sphere's surface is 0.19 m inside the top
+
+
+def test_a_sphere_just_above_the_view_is_left_out():
+    """The edge sphere's centre (1 ahead, 0.8 up) lies (0.8 − tan 30°) · cos 30° = 0.193 m
+    beyond the view's top plane: radius 0.3 reaches in (kept, above); radius 0.18 does not."""
+    model = _probe_model()
+    model.geom_size[model.geom("edge").id, 0] = 0.18
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    outside = FrustumCuller(model, model.camera("eye").id, aspect=1.0).outside(data)
+    assert "edge" in {model.geom(int(i)).name for i in outside}
 
 
 def test_a_probe_moves_out_of_view_when_its_body_turns_away():

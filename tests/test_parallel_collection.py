@@ -7,10 +7,12 @@ import multiprocessing
 
 import numpy as np
 import pytest
+from joblib import Parallel, delayed
 from tiny_runs import assert_same_runs, read_rows, run_in_process
 
 from crllk.envs.parallel import ParallelLaneKeepingEnv, WorkerError
 from crllk.errors import ConfigError
+from crllk.evaluation.runs import evaluate_run
 from crllk.rl.rollout import run_episodes
 from crllk.training.build import build_eval_env, worker_env
 from crllk.training.compose import compose_config
@@ -54,7 +56,7 @@ def test_workers_that_do_not_divide_num_envs_are_refused(tmp_path):
         run_in_process(tmp_path / "run", 1, [*SMALL, "workers=3"], frames_per_iteration=FRAMES)
     message = str(error.value)
     assert message == ("override: workers: must divide num_envs (2) into equal shares, "
-                       "got 3"), message
+                       "got 3 (obs=pixels sets 2; workers=1 steps them in this process)"), message
     assert not (tmp_path / "run").exists()
 
 
@@ -112,3 +114,15 @@ def test_a_failing_worker_is_one_line_naming_it():
                                 "least 1, got 0")
     assert "Traceback" in error.value.__notes__[0]
     assert not multiprocessing.active_children()
+
+
+def test_workers_start_inside_joblib_workers(tmp_path):
+    """Experiments evaluate runs in joblib (loky) worker processes, whose global start method
+    is loky's: a run trained with workers=2 still evaluates there in two worker processes of
+    its own, with the same episodes as in this process."""
+    run = run_in_process(tmp_path / "run", 1, [*SMALL, "workers=2"], frames_per_iteration=FRAMES)
+    here = evaluate_run(run, episodes=2, num_envs=2, name="here")
+    there = Parallel(n_jobs=2)(delayed(evaluate_run)(run, episodes=2, num_envs=2, name=name)
+                               for name in ("pool0", "pool1"))
+    for document in there:
+        assert document["episodes"] == here["episodes"]

@@ -10,9 +10,9 @@ Each worker is driven through its own pipe: a step sends it its slice of the act
 *blocks* until every worker has answered with its outputs (plain numpy arrays, a few KB per
 simulation). Nothing polls: on a two-core machine a parent spin-waiting on shared-memory flags
 (as TorchRL's ``ParallelEnv`` does) takes one core from the two workers and leaves pixel
-collection slower with two workers than with one. The workers rasterise on their own thread
-(:data:`WORKER_ENVIRONMENT`): with several processes drawing at once, llvmpipe's extra threads
-only add hand-offs.
+collection slower with two workers than with one. The workers inherit ``LP_NUM_THREADS=0``
+from ``import crllk`` (llvmpipe draws on each worker's own thread) and ignore Ctrl-C: the
+parent stops them.
 
 Workers are built by a picklable factory (a module-level function and its keyword arguments per
 worker). :meth:`~ParallelLaneKeepingEnv.sim_state` gathers the workers' snapshots into the one
@@ -23,7 +23,7 @@ snapshot a one-process env would take (:func:`~crllk.envs.batched.merge_sim_stat
 from __future__ import annotations
 
 import multiprocessing
-import os
+import signal
 import traceback
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager, suppress
@@ -45,9 +45,6 @@ from crllk.envs.batched import (
 )
 from crllk.errors import ConfigError, MapError
 
-WORKER_ENVIRONMENT = {"LP_NUM_THREADS": "0"}
-"""Environment variables of the worker processes: llvmpipe rasterises on the calling thread
-(each worker already has a core of its own)."""
 ANSWER_TIMEOUT_S = 600.0
 """How long a worker may take to answer one command (s; starting takes the longest: imports of
 10–30 s on a loaded machine) before it is taken for hung."""
@@ -95,19 +92,19 @@ class ParallelLaneKeepingEnv(MirroredTeacherFlag, EnvBase):
             torch.set_num_threads(num_threads)
         self._pipes: list[Connection] = []
         self._processes: list[multiprocessing.process.BaseProcess] = []
-        context = multiprocessing.get_context("spawn")
-        with _environment(WORKER_ENVIRONMENT):
-            for kwargs in worker_kwargs:
-                parent, child = context.Pipe()
-                process = context.Process(target=_serve, args=(child, create_env_fn, kwargs),
-                                          daemon=True)
-                process.start()
-                child.close()
-                self._pipes.append(parent)
-                self._processes.append(process)
         try:
+            with _standard_start_method():
+                context = multiprocessing.get_context("spawn")
+                for kwargs in worker_kwargs:
+                    parent, child = context.Pipe()
+                    process = context.Process(target=_serve, daemon=True,
+                                              args=(child, create_env_fn, kwargs))
+                    process.start()
+                    child.close()
+                    self._pipes.append(parent)
+                    self._processes.append(process)
             infos = self._gather()
-        except Exception:
+        except BaseException:
             self._stop()
             raise
         per_worker = infos[0]["num_envs"]
@@ -144,12 +141,16 @@ class ParallelLaneKeepingEnv(MirroredTeacherFlag, EnvBase):
         for index, pipe in enumerate(self._pipes):
             try:
                 if not pipe.poll(ANSWER_TIMEOUT_S):  # waits in the kernel, never spins
-                    self._stop()
                     raise WorkerError(f"simulation worker {index} did not answer within "
                                       f"{ANSWER_TIMEOUT_S:.0f} s")
                 status, value = pipe.recv()
             except (EOFError, OSError):
-                status, value = "error", "the process exited"
+                self._processes[index].join(CLOSE_TIMEOUT_S)
+                code = self._processes[index].exitcode
+                status, value = "error", f"the process exited (exit code {code})"
+            except BaseException:  # a hung worker, Ctrl-C: answers in flight would be stale
+                self._stop()
+                raise
             if status == "config_error" and failure is None:
                 kind, source, field, problem = value
                 failure = kind(source, field, problem)
@@ -246,6 +247,7 @@ def _serve(pipe: Connection, create_env_fn: Callable[..., BatchedLaneKeepingEnv]
            kwargs: dict[str, Any]) -> None:
     """A worker: builds its env, reports what the parent needs to know of it, then answers
     commands until ``close`` (or until the parent goes away)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's to handle
     torch.set_num_threads(1)
     try:
         env = create_env_fn(**kwargs)
@@ -281,7 +283,10 @@ def _serve(pipe: Connection, create_env_fn: Callable[..., BatchedLaneKeepingEnv]
             except Exception as error:  # reported to the parent, which raises
                 pipe.send(_failure(error))
             else:
-                pipe.send(("ok", answer))
+                try:
+                    pipe.send(("ok", answer))
+                except Exception as error:  # an answer that cannot be pickled
+                    pipe.send(_failure(error))
     finally:
         env.close()
 
@@ -306,18 +311,19 @@ def _arrays(tensordict: TensorDictBase) -> dict[str, np.ndarray]:
 
 
 @contextmanager
-def _environment(values: dict[str, str]) -> Iterator[None]:
-    """``os.environ`` with ``values`` set while processes are started (they inherit it)."""
-    saved = {key: os.environ.get(key) for key in values}
-    os.environ.update(values)
+def _standard_start_method() -> Iterator[None]:
+    """Processes started meanwhile can be spawned. A spawned child takes its parent's global
+    start method, and inside a joblib (loky) worker that is ``"loky"``, which a child that
+    is not loky's own cannot find: it would exit before running anything."""
+    current = multiprocessing.get_start_method(allow_none=True)
+    if current is None or current in multiprocessing.get_all_start_methods():
+        yield
+        return
+    multiprocessing.set_start_method("spawn", force=True)
     try:
         yield
     finally:
-        for key, value in saved.items():
-            if value is None:
-                os.environ.pop(key, None)
-            else:
-                os.environ[key] = value
+        multiprocessing.set_start_method(current, force=True)
 
 
 def _flatten(spec: Any, workers: int, shape: torch.Size) -> Any:

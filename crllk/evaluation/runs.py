@@ -28,11 +28,15 @@ default and the trainer's (``eval.num_envs``)."""
 def evaluate_run(run_dir: str | Path, *, episodes: int, deterministic: bool = False,
                  seed: int | None = None, num_envs: int = EVALUATION_ENVS,
                  overrides: Mapping[str, Any] | None = None,
-                 name: str | None = None) -> dict[str, Any]:
+                 name: str | None = None, workers: int | None = None) -> dict[str, Any]:
     """Plays the run's last policy and writes ``<run_dir>/eval.json`` (or ``<name>.json``);
     returns its content. ``overrides`` change the run's task settings for this evaluation
-    (e.g. ``{"randomize": {...}}`` or ``{"camera": {"robot_frames": True}}``)."""
+    (e.g. ``{"randomize": {...}}`` or ``{"camera": {"robot_frames": True}}``); the
+    simulations step in the run's ``workers`` processes, or in ``workers`` (the same
+    episodes either way)."""
     config = load_run_config(run_dir)
+    if workers is not None:
+        config.workers = workers
     if overrides:
         config.task = OmegaConf.to_container(OmegaConf.merge(config.task, dict(overrides)))
     seed = config.eval.seed if seed is None else seed

@@ -185,7 +185,7 @@ def _sweep_command(specs: Sequence[RunSpec], settings: Settings) -> list[str]:
             f"total_frames={settings.frames}", f"eval.episodes={settings.episodes}",
             f"eval.seed={settings.eval_seed}",
             f"run_dir={settings.runs_root}/${{task.name}}/{name}-seed${{seed}}",
-            "resume=true", "progress=false", "threads=1",
+            "resume=true", "progress=false", "threads=1", "workers=1",
             f"hydra.launcher.n_jobs={settings.jobs}", *settings.train_overrides, *spec.extra]
 
 
@@ -216,8 +216,8 @@ def evaluate_runs(requests: Sequence[tuple[Path, dict[str, Any]]], settings: Set
 
 
 def _evaluate(run_dir: Path, **kwargs: Any) -> None:
-    torch.set_num_threads(1)
-    print(format_summary(evaluate_run(run_dir, **kwargs)), flush=True)
+    torch.set_num_threads(1)  # each job one core: its simulations in its own process too
+    print(format_summary(evaluate_run(run_dir, workers=1, **kwargs)), flush=True)
 
 
 def train_and_evaluate(specs: Sequence[RunSpec], settings: Settings,

@@ -142,6 +142,6 @@ def collect(env: BatchedLaneKeepingEnv, actor: torch.nn.Module, carry: TensorDic
     """``steps`` control steps of every sub-environment with the stochastic policy; returns
     the transitions ``[N, steps]`` and the tensordict to continue from."""
     rollout = Rollout(env, actor, carry)
-    with torch.no_grad(), set_exploration_type(ExplorationType.RANDOM):
+    with set_exploration_type(ExplorationType.RANDOM):
         transitions = [rollout.step() for _ in range(steps)]
     return torch.stack(transitions, dim=1), rollout.td

@@ -8,7 +8,8 @@ outside the camera's view frustum contributes no pixel (the scene has no shadows
 reflections), so leaving it out gives the same image, bit for bit.
 
 A geom is left out by zeroing its alpha in the model while ``mjv_updateScene`` runs
-(MuJoCo skips geoms of alpha 0) and restoring it right after (:func:`hidden_geoms`).
+(MuJoCo skips geoms of alpha 0) and restoring it right after (:func:`hidden_geoms`): a write
+to the shared model, so scenes of one model are updated one at a time.
 """
 
 from __future__ import annotations
@@ -59,8 +60,8 @@ class FrustumCuller:
         radius = self._radii
         if self._resizable.size:
             radius = radius.copy()
-            sizes = model.geom_size[ids[self._resizable]]
-            radius[self._resizable] = np.linalg.norm(sizes, axis=1) * _SLACK + _MARGIN
+            resized = bounding_radii(model, ids[self._resizable])
+            radius[self._resizable] = resized * _SLACK + _MARGIN
         rotation = data.cam_xmat[camera].reshape(3, 3)
         local = (data.geom_xpos[ids] - data.cam_xpos[camera]) @ rotation  # x right, y up
         depth = -local[:, 2]  # MuJoCo cameras look along their -z axis
@@ -104,9 +105,12 @@ def hidden_geoms(model: mujoco.MjModel, ids: np.ndarray) -> Iterator[None]:
 
 def cullable(model: mujoco.MjModel, camera_id: int) -> bool:
     """Whether camera ``camera_id`` is one :class:`FrustumCuller` handles: a perspective
-    camera given by its vertical field of view."""
+    camera given by its vertical field of view, in a scene where a geom out of view cannot
+    change a pixel (no shadow maps, no reflecting materials)."""
+    shadows = model.vis.quality.shadowsize > 0 and bool(np.any(model.light_castshadow))
     return (int(model.cam_projection[camera_id]) == _PERSPECTIVE
-            and not np.any(model.cam_sensorsize[camera_id]))
+            and not np.any(model.cam_sensorsize[camera_id])
+            and not shadows and not np.any(model.mat_reflectance > 0))
 
 
 __all__ = ["FrustumCuller", "bounding_radii", "cullable", "hidden_geoms"]

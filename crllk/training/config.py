@@ -262,7 +262,8 @@ class TrainConfig:
             yield "ray_address", f"is only used with collector=ray, got collector={self.collector}"
         if self.num_envs % self.workers:
             yield "workers", (f"must divide num_envs ({self.num_envs}) into equal shares, "
-                              f"got {self.workers}")
+                              f"got {self.workers} (obs=pixels sets 2; workers=1 steps them in "
+                              "this process)")
         if self.task_file and not Path(self.task_file).exists():
             yield "task_file", f"no such file: {self.task_file}"
 

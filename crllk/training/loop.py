@@ -38,7 +38,6 @@ import crllk  # noqa: F401  (chooses the headless GL backend before torchrl impo
 from crllk.envs.batched import BatchedLaneKeepingEnv
 from crllk.envs.distributed import RayLaneKeepingCollector
 from crllk.envs.episodes import EpisodeAccumulator, EpisodeStats, summarise
-from crllk.envs.parallel import ParallelLaneKeepingEnv
 from crllk.errors import ConfigError
 from crllk.files import atomic_write_text
 from crllk.rl.lagrange import Multiplier
@@ -211,10 +210,8 @@ def collect_batch(env: TrainingEnv, actor: torch.nn.Module, carry: TensorDictBas
     ``carry``, or a batch of the remote collectors with the policy's current weights."""
     if isinstance(env, RayLaneKeepingCollector):
         return env.collect(actor, steps), None
-    if isinstance(env, ParallelLaneKeepingEnv):
-        with torch_threads(1):  # the worker processes hold the cores meanwhile
-            return collect(env, actor, carry, steps)
-    return collect(env, actor, carry, steps)
+    with torch_threads(1):  # worker processes hold the cores meanwhile; one process or
+        return collect(env, actor, carry, steps)  # several sample the same actions
 
 
 @contextmanager
