@@ -94,10 +94,12 @@ def collection_rates(config: TrainConfig, iterations: int = 3) -> CollectionRate
     env, learner, multipliers, generator = build_run(config)
     try:
         carry = first_carry(env)
-        _, carry = collect_batch(env, learner.actor, carry, config.rollout_steps)  # warm-up
+        _, carry = collect_batch(env, learner.actor, carry, config.rollout_steps,
+                                 learner.action_noise)  # warm-up
         start = time.perf_counter()
         for _ in range(iterations):
-            batch, carry = collect_batch(env, learner.actor, carry, config.rollout_steps)
+            batch, carry = collect_batch(env, learner.actor, carry, config.rollout_steps,
+                                         learner.action_noise)
         collecting = (time.perf_counter() - start) / iterations
         shape_signals(batch, config, env.config)
         start = time.perf_counter()

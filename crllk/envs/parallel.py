@@ -170,6 +170,15 @@ class ParallelLaneKeepingEnv(MirroredTeacherFlag, EnvBase):
             pipe.send(("call", (name, () if arguments is None else tuple(arguments[index]))))
         return self._gather()
 
+    def run(self, function: Callable[..., Any], arguments: Sequence[Sequence[Any]]) -> list[Any]:
+        """``function(env, *arguments[w])`` in every worker ``w``, on its own env, all at
+        once; the results in worker order. ``function`` must be a module-level function (the
+        workers import it); what it takes and returns crosses a pipe (keep it to numpy
+        arrays and plain values)."""
+        for pipe, args in zip(self._pipes, arguments, strict=True):
+            pipe.send(("run", (function, tuple(args))))
+        return self._gather()
+
     def _send_teacher_active(self, active: bool) -> None:
         self._call("set_teacher_active", [[active]] * self.workers)
 
@@ -276,6 +285,9 @@ def _serve(pipe: Connection, create_env_fn: Callable[..., BatchedLaneKeepingEnv]
                     mask = (None if argument is None else TensorDict(
                         {"_reset": torch.from_numpy(argument).reshape(-1, 1)}, batch_size=batch))
                     answer = (_arrays(env._reset(mask)), _details(env))
+                elif command == "run":
+                    function, arguments = argument
+                    answer = function(env, *arguments)
                 else:
                     name, arguments = argument
                     attribute = getattr(env, name)

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -19,6 +20,7 @@ from torchrl.envs.utils import ExplorationType, set_exploration_type, step_mdp
 
 from crllk.envs.batched import TERMINATIONS, BatchedLaneKeepingEnv
 from crllk.envs.episodes import EpisodeAccumulator, EpisodeStats, Summary, summarise
+from crllk.rl.sampling import ActionNoise, sample_actions
 from crllk.tasks.constraints import Constraint
 
 
@@ -138,10 +140,14 @@ __all__ = ["EvaluationResult", "Rollout", "collect", "episode_quotas", "run_epis
 
 @torch.no_grad()
 def collect(env: BatchedLaneKeepingEnv, actor: torch.nn.Module, carry: TensorDictBase,
-            steps: int) -> tuple[TensorDictBase, TensorDictBase]:
+            steps: int, noise: ActionNoise | None = None
+            ) -> tuple[TensorDictBase, TensorDictBase]:
     """``steps`` control steps of every sub-environment with the stochastic policy; returns
-    the transitions ``[N, steps]`` and the tensordict to continue from."""
-    rollout = Rollout(env, actor, carry)
+    the transitions ``[N, steps]`` and the tensordict to continue from. With ``noise``,
+    simulation ``i`` samples its actions from stream ``i`` (:func:`sample_actions`), else from
+    torch's global generator."""
+    policy = actor if noise is None else partial(sample_actions, actor, noise=noise)
+    rollout = Rollout(env, policy, carry)
     with set_exploration_type(ExplorationType.RANDOM):
         transitions = [rollout.step() for _ in range(steps)]
     return torch.stack(transitions, dim=1), rollout.td

@@ -16,6 +16,7 @@ from crllk.errors import ConfigError
 from crllk.rl.lagrange import Multiplier, make_multiplier
 from crllk.rl.loss import AdvantageModules, LagrangianPPOLoss, make_advantage_modules
 from crllk.rl.models import make_actor, make_critic, make_shared_critic
+from crllk.rl.sampling import ActionNoise
 from crllk.tasks.constraints import Constraint
 from crllk.tasks.lane_keeping import state_feature_names
 from crllk.training.config import CLUSTER_EXTRA, SOURCE, TrainConfig
@@ -30,6 +31,8 @@ class Learner:
     loss: LagrangianPPOLoss
     advantages: AdvantageModules
     optimizer: torch.optim.Optimizer
+    action_noise: ActionNoise
+    """Each training simulation's stream of action samples (:mod:`crllk.rl.sampling`)."""
 
 
 def build_env(config: TrainConfig, *, num_envs: int, seed: int,
@@ -138,7 +141,8 @@ def build_learner(config: TrainConfig, env: TrainingEnv) -> Learner:
     advantages = make_advantage_modules(ppo.gamma, ppo.gae_lambda, critics["reward"],
                                         {c: critics[c] for c in costs}, loss=loss)
     optimizer = torch.optim.Adam(loss.parameters(), lr=ppo.lr)
-    return Learner(actor, critics, loss, advantages, optimizer)
+    return Learner(actor, critics, loss, advantages, optimizer,
+                   ActionNoise.seeded(config.seed, config.num_envs))
 
 
 def build_multipliers(config: TrainConfig, constraints: Sequence[Constraint]

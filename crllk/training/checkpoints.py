@@ -16,9 +16,12 @@ from crllk.rl.lagrange import Multiplier, multiplier_from_state
 from crllk.training.build import Learner, TrainingEnv, keeps_snapshots
 from crllk.training.config import TrainConfig
 
-CHECKPOINT_FORMAT = 2
+CHECKPOINT_FORMAT = 3
 """Version of the checkpoint layout written by :mod:`crllk.training.loop` (2: constraints by
-name, the task's episode state whole)."""
+name, the task's episode state whole; 3: each simulation's action stream)."""
+READABLE_FORMATS = (2, 3)
+"""Formats whose policy (actor, counters, multipliers) this version reads; only
+:data:`CHECKPOINT_FORMAT` resumes."""
 
 
 def save_checkpoint(path: str | Path, state: dict[str, Any]) -> Path:
@@ -49,8 +52,9 @@ def policy_info(state: dict[str, Any]) -> dict[str, Any]:
                             for name, m in state["multipliers"].items()}}
 
 
-def load_checkpoint(path: str | Path) -> dict[str, Any]:
-    """Loads a checkpoint written by :func:`save_checkpoint`."""
+def load_checkpoint(path: str | Path, *, resuming: bool = False) -> dict[str, Any]:
+    """Loads a checkpoint written by :func:`save_checkpoint` (of any of
+    :data:`READABLE_FORMATS`; only of :data:`CHECKPOINT_FORMAT` when ``resuming``)."""
     path = Path(path)
     try:
         state = torch.load(path, map_location="cpu", weights_only=False)
@@ -62,10 +66,12 @@ def load_checkpoint(path: str | Path) -> dict[str, Any]:
                           f"{reason})") from None
     if not isinstance(state, dict) or "format" not in state:
         raise ConfigError(path, "format", "not a crllk checkpoint")
-    if state["format"] != CHECKPOINT_FORMAT:
+    readable = (CHECKPOINT_FORMAT,) if resuming else READABLE_FORMATS
+    if state["format"] not in readable:
         raise ConfigError(path, "format", f"written in format {state['format']}, this version "
-                          f"reads format {CHECKPOINT_FORMAT}: resume it with the version that "
-                          "wrote it, or start a new run")
+                          f"{'resumes' if resuming else 'reads'} format "
+                          f"{' and '.join(map(str, readable))}: resume it with the version "
+                          "that wrote it, or start a new run")
     return state
 
 
@@ -88,6 +94,7 @@ def checkpoint_state(config: TrainConfig, learner: Learner, multipliers: dict[st
         "carry": carry.clone() if snapshots else None,
         "torch_rng": torch.get_rng_state(),
         "generator": generator.get_state(),
+        "action_noise": learner.action_noise.states(),
     }
 
 
@@ -110,4 +117,5 @@ def restore(state: dict[str, Any], learner: Learner, multipliers: dict[str, Mult
         env.load_sim_state(state["env"])
     torch.set_rng_state(state["torch_rng"])
     generator.set_state(state["generator"])
+    learner.action_noise.load_states(state["action_noise"])
     return exact

@@ -38,10 +38,13 @@ import crllk  # noqa: F401  (chooses the headless GL backend before torchrl impo
 from crllk.envs.batched import BatchedLaneKeepingEnv
 from crllk.envs.distributed import RayLaneKeepingCollector
 from crllk.envs.episodes import EpisodeAccumulator, EpisodeStats, summarise
+from crllk.envs.parallel import ParallelLaneKeepingEnv
 from crllk.errors import ConfigError
 from crllk.files import atomic_write_text
+from crllk.rl.collection import collect_in_workers
 from crllk.rl.lagrange import Multiplier
 from crllk.rl.rollout import EvaluationResult, collect, run_episodes
+from crllk.rl.sampling import ActionNoise
 from crllk.tasks.constraints import Constraint
 from crllk.training.build import Learner, TrainingEnv, build_env, build_eval_env, build_run
 from crllk.training.checkpoints import (
@@ -101,7 +104,7 @@ def train(config: TrainConfig, on_final_evaluation: FinalEvaluation | None = Non
     iteration, frames, elapsed = 0, 0, 0.0
 
     if resuming:
-        state = load_checkpoint(checkpoint_path)
+        state = load_checkpoint(checkpoint_path, resuming=True)
         exact = restore(state, learner, multipliers, episodes, env, generator)
         carry = state["carry"] if exact else first_carry(env)
         iteration, frames, elapsed = state["iteration"], state["frames"], state["elapsed"]
@@ -183,7 +186,8 @@ def learn(config: TrainConfig, env: TrainingEnv, learner: Learner,
     sub-environment, update the multipliers from the episodes that finished, run the PPO
     epochs. Returns the batch, the tensordict to continue from, the finished episodes and the
     mean loss terms."""
-    batch, carry = collect_batch(env, learner.actor, carry, config.rollout_steps)
+    batch, carry = collect_batch(env, learner.actor, carry, config.rollout_steps,
+                                 learner.action_noise)
     finished = episodes.add_batch(batch)
     update_multipliers(multipliers, finished)
     learner.loss.set_multipliers({name: m.value for name, m in multipliers.items()})
@@ -204,14 +208,18 @@ def first_carry(env: TrainingEnv) -> TensorDictBase | None:
 
 
 def collect_batch(env: TrainingEnv, actor: torch.nn.Module, carry: TensorDictBase | None,
-                  steps: int) -> tuple[TensorDictBase, TensorDictBase | None]:
+                  steps: int, noise: ActionNoise) -> tuple[TensorDictBase, TensorDictBase | None]:
     """``steps`` steps of every simulation with the stochastic policy (the transitions
     ``[num_envs, steps]``) and what to continue from: :func:`crllk.rl.rollout.collect` from
-    ``carry``, or a batch of the remote collectors with the policy's current weights."""
+    ``carry`` with the simulations' action streams ``noise``, in this process or in the
+    worker processes (the same batch either way), or a batch of the remote collectors with the
+    policy's current weights."""
     if isinstance(env, RayLaneKeepingCollector):
         return env.collect(actor, steps), None
-    with torch_threads(1):  # worker processes hold the cores meanwhile; one process or
-        return collect(env, actor, carry, steps)  # several sample the same actions
+    if isinstance(env, ParallelLaneKeepingEnv):
+        return collect_in_workers(env, actor, carry, steps, noise)
+    with torch_threads(1):  # as in a worker: the same kernels, so the same actions
+        return collect(env, actor, carry, steps, noise)
 
 
 @contextmanager

@@ -1,0 +1,81 @@
+"""Training batches collected inside the worker processes of a parallel env.
+
+:func:`collect_in_workers` sends every worker of a
+:class:`~crllk.envs.parallel.ParallelLaneKeepingEnv` the policy (once per batch), its slice of
+the tensordict to continue from and its simulations' action streams; each worker then runs
+:func:`crllk.rl.rollout.collect` on its own simulations, policy included, with no round trip
+per step, and sends back its transitions. The parent waits in the kernel meanwhile, so the
+workers have the cores to themselves.
+
+The batch equals what :func:`~crllk.rl.rollout.collect` gives in one process from the same
+carry and streams: each simulation samples from its own stream
+(:mod:`crllk.rl.sampling`), and the policy's outputs for a simulation do not depend on the
+others in its batch (tested for the run's layouts: CPU kernels may round differently for
+batches of other sizes).
+"""
+
+from __future__ import annotations
+
+import pickle
+from collections.abc import Iterable
+
+import numpy as np
+import torch
+from tensordict import TensorDict, TensorDictBase
+
+from crllk.envs.batched import BatchedLaneKeepingEnv
+from crllk.envs.parallel import ParallelLaneKeepingEnv
+from crllk.rl.rollout import collect
+from crllk.rl.sampling import ActionNoise
+
+Arrays = dict[str | tuple[str, ...], np.ndarray]
+"""A tensordict's leaves as numpy arrays by (nested) key: what crosses a worker's pipe."""
+
+
+def to_arrays(tensordict: TensorDictBase) -> Arrays:
+    """Every leaf of ``tensordict`` as a numpy array, by its (nested) key."""
+    return {key: value.numpy() for key, value in
+            tensordict.items(include_nested=True, leaves_only=True)}
+
+
+def joined(parts: Iterable[Arrays], batch_size: torch.Size) -> TensorDict:
+    """One tensordict of ``batch_size`` from slices of it along the first dimension, in
+    order (the inverse of :func:`to_arrays` on consecutive slices)."""
+    parts = list(parts)
+    tensordict = TensorDict({}, batch_size=batch_size)
+    for key in parts[0]:
+        tensordict.set(key, torch.from_numpy(np.concatenate([part[key] for part in parts])))
+    return tensordict
+
+
+def collect_in_workers(env: ParallelLaneKeepingEnv, actor: torch.nn.Module,
+                       carry: TensorDictBase, steps: int, noise: ActionNoise
+                       ) -> tuple[TensorDictBase, TensorDictBase]:
+    """``steps`` control steps of every simulation, each worker stepping its own with its copy
+    of ``actor``; the transitions ``[N, steps]`` and the tensordict to continue from, as
+    :func:`~crllk.rl.rollout.collect` returns them. ``noise`` continues from where the
+    workers left their streams."""
+    policy = pickle.dumps(actor)  # this process's own object, read only by its own workers
+    n = env.per_worker
+    states = [state.numpy() for state in noise.states()]
+    shares = [(policy, to_arrays(carry[w * n:(w + 1) * n]), states[w * n:(w + 1) * n], steps)
+              for w in range(env.workers)]
+    answers = env.run(collect_share, shares)
+    batch = joined((answer[0] for answer in answers), torch.Size([env.num_envs, steps]))
+    following = joined((answer[1] for answer in answers), env.batch_size)
+    noise.load_states([torch.from_numpy(state) for answer in answers for state in answer[2]])
+    return batch, following
+
+
+def collect_share(env: BatchedLaneKeepingEnv, policy: bytes, carry: Arrays,
+                  states: list[np.ndarray], steps: int
+                  ) -> tuple[Arrays, Arrays, list[np.ndarray]]:
+    """A worker's part of :func:`collect_in_workers` (runs in the worker): its transitions,
+    the tensordict to continue from and its streams' states, as arrays."""
+    actor = pickle.loads(policy)
+    noise = ActionNoise.from_states([torch.from_numpy(state) for state in states])
+    batch, following = collect(env, actor, joined([carry], env.batch_size), steps, noise)
+    return to_arrays(batch), to_arrays(following), [s.numpy() for s in noise.states()]
+
+
+__all__ = ["collect_in_workers", "collect_share", "joined", "to_arrays"]
