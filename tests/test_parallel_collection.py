@@ -56,7 +56,8 @@ def test_workers_that_do_not_divide_num_envs_are_refused(tmp_path):
         run_in_process(tmp_path / "run", 1, [*SMALL, "workers=3"], frames_per_iteration=FRAMES)
     message = str(error.value)
     assert message == ("override: workers: must divide num_envs (2) into equal shares, "
-                       "got 3 (obs=pixels sets 2; workers=1 steps them in this process)"), message
+                       "got 3 (obs=pixels and obs=state set 2; workers=1 steps them in this "
+                       "process)"), message
     assert not (tmp_path / "run").exists()
 
 

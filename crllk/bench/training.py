@@ -1,8 +1,9 @@
-"""Training throughput next to environment-only throughput, measured in one process.
+"""Training throughput next to environment-only throughput.
 
 Training frames/s counts a whole iteration of :mod:`crllk.train` (collection with the policy,
-GAE for reward and costs, PPO epochs); the bound is the same batched environment stepped with
-random actions and no networks. The target is a ratio of at least 0.5 (state).
+GAE for reward and costs, PPO epochs); the bound is the same simulations stepped with random
+actions and no networks, where training steps them (in this process, or each worker stepping
+its own). The target is a ratio of at least 0.5.
 
 :func:`collection_rates` times collection with the policy (and whole iterations) for a number
 of worker processes (the trainer's ``workers``), to compare one process with several.
@@ -18,7 +19,9 @@ import torch
 from torchrl.envs.utils import ExplorationType, set_exploration_type
 
 import crllk  # noqa: F401  (headless GL before torchrl)
+from crllk.envs.batched import BatchedLaneKeepingEnv
 from crllk.envs.episodes import EpisodeAccumulator
+from crllk.envs.parallel import ParallelLaneKeepingEnv
 from crllk.training.build import build_run
 from crllk.training.compose import compose_config
 from crllk.training.config import TrainConfig, validate
@@ -60,14 +63,23 @@ def training_rates(config: TrainConfig, iterations: int = 5) -> TrainingRates:
     training = iterations * config.frames_per_batch / (time.perf_counter() - start)
 
     steps = iterations * config.rollout_steps
-    td = env.reset()
     start = time.perf_counter()
-    for _ in range(steps):
-        td["action"] = env.action_spec.rand()
-        _, td = env.step_and_maybe_reset(td)
+    if isinstance(env, ParallelLaneKeepingEnv):  # where training steps them: in the workers
+        env.run(random_steps, [(steps,)] * env.workers)
+    else:
+        random_steps(env, steps)
     environment = steps * config.num_envs / (time.perf_counter() - start)
     env.close()
     return TrainingRates(training=training, environment=environment)
+
+
+def random_steps(env: BatchedLaneKeepingEnv, steps: int) -> None:
+    """``steps`` steps of every simulation of ``env`` with random actions, resetting those
+    that finish (the environment alone; in a worker process for a parallel env)."""
+    td = env.reset()
+    for _ in range(steps):
+        td["action"] = env.action_spec.rand()
+        _, td = env.step_and_maybe_reset(td)
 
 
 @dataclass(frozen=True)

@@ -131,12 +131,16 @@ def sample_actions(actor: ProbabilisticActor, tensordict: TensorDictBase,
     count = len(noise)
     if tensordict.batch_size != torch.Size([count]):
         raise ValueError(f"{count} action streams for a batch of {tuple(tensordict.batch_size)}")
-    network, sampler = actor.module[0], actor.module[-1]
+    network, sampler = actor.module[0], actor.module[-1]  # parameters, then the sample
+    inputs = [tensordict.get(key) for key in network.in_keys]
     padded_count = -(-count // POLICY_ROWS) * POLICY_ROWS
-    rows = torch.arange(padded_count).clamp_max(count - 1)  # the last row repeated
-    parameters = network(tensordict.select(*network.in_keys)[rows])
-    for key in network.out_keys:
-        tensordict.set(key, parameters.get(key)[:count])
+    if padded_count != count:
+        rows = torch.arange(padded_count).clamp_max(count - 1)  # the last row repeated
+        inputs = [value[rows] for value in inputs]
+    outputs = network.module(*inputs)  # the bare network: no tensordict plumbing per step
+    outputs = outputs if isinstance(outputs, tuple) else (outputs,)
+    for key, value in zip(network.out_keys, outputs, strict=True):
+        tensordict.set(key, value[:count])
     action, log_prob = draw(sampler.get_dist(tensordict), noise)
     tensordict.set(sampler.out_keys[0], action)
     tensordict.set(sampler.log_prob_key, log_prob)

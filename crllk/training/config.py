@@ -202,12 +202,13 @@ class TrainConfig:
     num_envs: int = setting(16, check=positive)
     """Simulations stepped together (split evenly among ``workers`` processes)."""
     workers: int = setting(1, check=positive)
-    """Processes that step the simulations (obs=pixels: 2); num_envs is split among them
-    (num_envs/workers each, worker processes driven through pipes; the policy and the PPO
-    update stay in the main process). Simulation i spawns from the same seed whatever the
-    number of workers, so a run with several workers collects exactly what it would with one,
-    and resumes exactly from its checkpoints (with any number of workers). With collector=ray:
-    the remote collectors."""
+    """Processes that collect from the simulations (obs=pixels and obs=state: 2); num_envs is
+    split among them (num_envs/workers each). Each worker steps its simulations with its own
+    copy of the policy, sent once per iteration; the PPO update, evaluations and checkpoints
+    stay in the main process. Simulation i spawns from the same seed and samples its actions
+    from its own stream whatever the number of workers, so a run with several workers
+    collects exactly what it would with one, and resumes exactly from its checkpoints (with
+    any number of workers). With collector=ray: the remote collectors."""
     collector: str = setting("local", check=one_of("local", "ray"))
     """Where the simulations run. local: on this machine (workers processes). ray: in workers
     remote collectors of TorchRL's RayCollector (the cluster extra), num_envs/workers
@@ -262,8 +263,8 @@ class TrainConfig:
             yield "ray_address", f"is only used with collector=ray, got collector={self.collector}"
         if self.num_envs % self.workers:
             yield "workers", (f"must divide num_envs ({self.num_envs}) into equal shares, "
-                              f"got {self.workers} (obs=pixels sets 2; workers=1 steps them in "
-                              "this process)")
+                              f"got {self.workers} (obs=pixels and obs=state set 2; workers=1 "
+                              "steps them in this process)")
         if self.task_file and not Path(self.task_file).exists():
             yield "task_file", f"no such file: {self.task_file}"
 
