@@ -39,6 +39,17 @@ def test_two_workers_train_exactly_as_one_process(tmp_path):
     assert_same_runs(one, two, 3, ignore=["workers"])
 
 
+def test_two_workers_train_continuous_actions_exactly_as_one_process(tmp_path):
+    """The tanh-Gaussian policy too: its samples (drawn in double precision from each
+    simulation's stream) and their log-probabilities do not depend on the batch a worker
+    holds, so the runs are equal bit for bit."""
+    continuous = [*SMALL, "action=continuous"]
+    two = run_in_process(tmp_path / "two", 2, [*continuous, "workers=2"],
+                         frames_per_iteration=FRAMES)
+    one = run_in_process(tmp_path / "one", 2, continuous, frames_per_iteration=FRAMES)
+    assert_same_runs(one, two, 2, ignore=["workers"])
+
+
 def test_two_workers_stopped_run_resumes_exactly(tmp_path):
     """A workers=2 run stopped after two iterations (its last checkpoint) and resumed with two
     workers for two more equals an uninterrupted run (of one process: the test above shows it

@@ -343,4 +343,8 @@ def _flatten(spec: Any, workers: int, shape: torch.Size) -> Any:
     return spec.expand(workers, *spec.shape).reshape(*shape, *spec.shape[1:])
 
 
-__all__ = ["ParallelLaneKeepingEnv", "TaskView", "WorkerError"]
+LaneKeepingEnv = BatchedLaneKeepingEnv | ParallelLaneKeepingEnv
+"""The simulations of a run on this machine: in this process or in worker processes (the same
+keys, layout and episodes either way)."""
+
+__all__ = ["LaneKeepingEnv", "ParallelLaneKeepingEnv", "TaskView", "WorkerError"]

@@ -10,7 +10,8 @@ from typing import Any
 
 from omegaconf import OmegaConf
 
-from crllk.envs.batched import BatchedLaneKeepingEnv, make_env
+from crllk.envs.batched import make_env
+from crllk.envs.parallel import LaneKeepingEnv
 from crllk.evaluation.report import result_document
 from crllk.files import atomic_write_text
 from crllk.rl.rollout import EvaluationResult, run_episodes
@@ -53,7 +54,7 @@ def evaluate_run(run_dir: str | Path, *, episodes: int, deterministic: bool = Fa
                             overrides=overrides, name=name)
 
 
-def write_evaluation(run_dir: str | Path, config: TrainConfig, env: BatchedLaneKeepingEnv,
+def write_evaluation(run_dir: str | Path, config: TrainConfig, env: LaneKeepingEnv,
                      result: EvaluationResult, info: dict[str, Any], *,
                      settings: dict[str, Any], overrides: Mapping[str, Any] | None = None,
                      name: str | None = None) -> dict[str, Any]:
@@ -76,7 +77,7 @@ def write_evaluation(run_dir: str | Path, config: TrainConfig, env: BatchedLaneK
     return document
 
 
-def write_final_evaluation(run_dir: Path, config: TrainConfig, env: BatchedLaneKeepingEnv,
+def write_final_evaluation(run_dir: Path, config: TrainConfig, env: LaneKeepingEnv,
                            result: EvaluationResult, info: dict[str, Any]) -> None:
     """``eval.json`` from the evaluation the trainer makes at the end of training
     (``eval.episodes`` sampled episodes from ``eval.seed``): what ``python -m crllk.evaluate

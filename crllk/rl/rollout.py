@@ -20,6 +20,7 @@ from torchrl.envs.utils import ExplorationType, set_exploration_type, step_mdp
 
 from crllk.envs.batched import TERMINATIONS, BatchedLaneKeepingEnv
 from crllk.envs.episodes import EpisodeAccumulator, EpisodeStats, Summary, summarise
+from crllk.envs.parallel import LaneKeepingEnv
 from crllk.rl.sampling import ActionNoise, sample_actions
 from crllk.tasks.constraints import Constraint
 
@@ -43,7 +44,7 @@ class Rollout:
     """Steps ``env`` with ``policy`` from ``td`` (a fresh reset without it). Finished
     sub-environments reset after each step, once ``on_step`` has seen the transition."""
 
-    def __init__(self, env: BatchedLaneKeepingEnv,
+    def __init__(self, env: LaneKeepingEnv,
                  policy: Callable[[TensorDictBase], TensorDictBase],
                  td: TensorDictBase | None = None) -> None:
         self.env, self.policy = env, policy
@@ -72,13 +73,13 @@ def episode_quotas(episodes: int, num_envs: int) -> np.ndarray:
 
 
 @torch.no_grad()
-def run_episodes(env: BatchedLaneKeepingEnv, policy: Callable[[TensorDictBase], TensorDictBase],
+def run_episodes(env: LaneKeepingEnv, policy: Callable[[TensorDictBase], TensorDictBase],
                  episodes: int, *, deterministic: bool = True,
                  sample_seed: int | None = None) -> EvaluationResult:
     """Plays ``episodes`` full episodes with ``policy`` from a fresh reset of ``env``.
 
     Args:
-        env: a :class:`crllk.envs.batched.BatchedLaneKeepingEnv` (batch size ``[N]``).
+        env: the simulations, in this process or in worker processes (batch size ``[N]``).
         policy: writes ``"action"`` into the tensordict it is given.
         episodes: how many episodes to finish in total.
         deterministic: take the policy's mode instead of sampling.
@@ -92,7 +93,7 @@ def run_episodes(env: BatchedLaneKeepingEnv, policy: Callable[[TensorDictBase], 
         return _run_episodes(env, policy, episodes, deterministic)
 
 
-def _run_episodes(env: BatchedLaneKeepingEnv, policy: Callable[[TensorDictBase], TensorDictBase],
+def _run_episodes(env: LaneKeepingEnv, policy: Callable[[TensorDictBase], TensorDictBase],
                   episodes: int, deterministic: bool) -> EvaluationResult:
     num_envs = int(env.batch_size[0])
     quotas = episode_quotas(episodes, num_envs)

@@ -11,7 +11,7 @@ import torch
 import crllk  # noqa: F401  (chooses the headless GL backend before torchrl imports mujoco)
 from crllk.envs.batched import BatchedLaneKeepingEnv, make_env, sub_env_seeds
 from crllk.envs.distributed import RayClusterError, RayLaneKeepingCollector
-from crllk.envs.parallel import ParallelLaneKeepingEnv
+from crllk.envs.parallel import LaneKeepingEnv, ParallelLaneKeepingEnv
 from crllk.errors import ConfigError
 from crllk.rl.lagrange import Multiplier, make_multiplier
 from crllk.rl.loss import AdvantageModules, LagrangianPPOLoss, make_advantage_modules
@@ -86,7 +86,7 @@ def build_training_env(config: TrainConfig) -> TrainingEnv:
 
 
 def build_eval_env(config: TrainConfig, *, num_envs: int,
-                   seed: int) -> BatchedLaneKeepingEnv | ParallelLaneKeepingEnv:
+                   seed: int) -> LaneKeepingEnv:
     """An evaluation's environment (:func:`build_env`), split among the run's ``workers``
     processes like its training simulations when they divide ``num_envs`` (and the run
     collects locally); simulation ``i`` spawns from the same seed either way, so the episodes

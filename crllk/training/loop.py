@@ -38,7 +38,7 @@ import crllk  # noqa: F401  (chooses the headless GL backend before torchrl impo
 from crllk.envs.batched import BatchedLaneKeepingEnv
 from crllk.envs.distributed import RayLaneKeepingCollector
 from crllk.envs.episodes import EpisodeAccumulator, EpisodeStats, summarise
-from crllk.envs.parallel import ParallelLaneKeepingEnv
+from crllk.envs.parallel import LaneKeepingEnv, ParallelLaneKeepingEnv
 from crllk.errors import ConfigError
 from crllk.files import atomic_write_text
 from crllk.rl.collection import collect_in_workers
@@ -73,7 +73,7 @@ if TYPE_CHECKING:
     from crllk.recording.live import LiveView
 
 
-FinalEvaluation = Callable[[Path, TrainConfig, BatchedLaneKeepingEnv, EvaluationResult,
+FinalEvaluation = Callable[[Path, TrainConfig, LaneKeepingEnv, EvaluationResult,
                            dict[str, Any]], None]
 """Called with the run directory, its configuration, the evaluation env, the episodes of the
 evaluation made at the end of training and the final policy's counters and multipliers
@@ -265,7 +265,7 @@ def episode_columns(finished: Sequence[EpisodeStats], constraints: Sequence[Cons
             **{f"{metric}_encounter": value for metric, value in encounters.J.items()}}
 
 
-def evaluate(config: TrainConfig, env: BatchedLaneKeepingEnv, learner: Learner, iteration: int,
+def evaluate(config: TrainConfig, env: LaneKeepingEnv, learner: Learner, iteration: int,
              frames: int, time_s: float) -> tuple[dict[str, Any], EvaluationResult]:
     """Episodes of the sampled policy from the evaluation seed (spawns and action samples),
     as ``python -m crllk.evaluate`` plays them: the ``eval.csv`` row (with whether every
