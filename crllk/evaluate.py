@@ -33,6 +33,7 @@ from typing import Any
 from crllk.cli import run
 from crllk.errors import ConfigError
 from crllk.files import atomic_write_text, write_problem
+from crllk.protocol import VALIDATION_SEED
 from crllk.settings import (
     at_least_one,
     file_stem,
@@ -40,10 +41,11 @@ from crllk.settings import (
     one_of,
     parse_dotlist,
     setting,
+    spawn_seed,
 )
 from crllk.tasks.actions import ACTIONS
 from crllk.tasks.follower import FollowerGains
-from crllk.training.config import EVALUATION_SEED, algo_thresholds
+from crllk.training.config import algo_thresholds
 from crllk.training.run_dir import EVAL_RECORDING
 
 SOURCE = "evaluate"
@@ -70,8 +72,9 @@ class EvaluateConfig:
     episodes: int = setting(100, check=at_least_one)
     deterministic: bool = False
     """The policy's mode instead of sampled actions."""
-    seed: int | None = setting(None, check=non_negative)
-    """Spawn and sampling seed (default: the run's ``eval.seed``)."""
+    seed: int | None = setting(None, check=spawn_seed)
+    """Spawn and sampling seed (default: the run's ``eval.seed``, a validation seed; the test
+    seed is refused, :mod:`crllk.protocol`)."""
     num_envs: int = setting(10, check=at_least_one)
     """Episode k runs in simulation k mod num_envs."""
     threads: int = setting(1, check=at_least_one)
@@ -145,7 +148,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             if getattr(config, name):
                 output[name] = evaluate_follower(
                     config.task, episodes=config.episodes, num_envs=config.num_envs,
-                    seed=EVALUATION_SEED if config.seed is None else config.seed,
+                    seed=VALIDATION_SEED if config.seed is None else config.seed,
                     thresholds=config.thresholds, avoid_obstacles=name == "teacher",
                     action=config.action, margin=config.margin)
                 print(format_summary(output[name]), flush=True)

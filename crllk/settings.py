@@ -20,6 +20,7 @@ from omegaconf import MISSING, OmegaConf
 from omegaconf.errors import ConfigKeyError, OmegaConfBaseException
 
 from crllk.errors import ConfigError
+from crllk.protocol import reserved_seed_problem
 
 Check = Callable[[Any], str | None]
 """A field's check: the problem with a value (``"must be > 0"``), or None."""
@@ -37,6 +38,11 @@ def positive(value: float) -> str | None:
 
 def non_negative(value: float) -> str | None:
     return None if value >= 0 else "must be >= 0"
+
+
+def spawn_seed(value: int) -> str | None:
+    """A seed of training or of a validation evaluation: not negative, not the test seed."""
+    return non_negative(value) or reserved_seed_problem(value)
 
 
 def at_least_one(value: int) -> str | None:
@@ -138,5 +144,5 @@ def check(settings: Any, source: str, prefix: str = "") -> None:
 
 
 __all__ = ["MISSING", "at_least_one", "check", "host_port", "non_negative", "one_of",
-           "open_unit_interval", "parse", "parse_dotlist", "positive", "setting", "tcp_port",
-           "unit_interval"]
+           "open_unit_interval", "parse", "parse_dotlist", "positive", "setting", "spawn_seed",
+           "tcp_port", "unit_interval"]

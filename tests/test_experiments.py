@@ -15,6 +15,7 @@ from conftest import TINY_EXPERIMENT
 from crllk.experiments import AGENTS, PAPER_TABLE1, sweep_markdown, table_markdown
 from crllk.experiments.runs import MODE_EVALUATION
 from crllk.experiments.seeds import seed_cells, seeds_markdown, seeds_table, table_documents
+from crllk.protocol import TEST_EVALUATION, TEST_SEED, VALIDATION_SEED
 from crllk.training.runs import read_eval_json
 
 REPO = Path(__file__).resolve().parents[1]
@@ -27,13 +28,14 @@ def test_table1_lists_every_agent_beside_the_paper(tiny_experiments):
     assert document["paper"]["CRLLK-D"]["J_clane"] == list(PAPER_TABLE1["CRLLK-D"]["J_clane"])
     for agent, entry in document["agents"].items():
         run = runs / "small_loop" / f"{agent}-a0.5-seed0"
-        summary = read_eval_json(run)["summary"]
-        assert entry["J_clane"]["values"] == [summary["J_clane"]]
+        test = read_eval_json(run, TEST_EVALUATION)
+        assert test["evaluation"]["seed"] == TEST_SEED
+        assert entry["J_clane"]["values"] == [test["summary"]["J_clane"]]
         assert entry["frames"] == [16]
-        # the deployed policy, its mode, played through the same episodes
+        # the deployed policy, its mode, played through the same test episodes
         mode = json.loads((run / f"{MODE_EVALUATION}.json").read_text())
         assert mode["evaluation"]["deterministic"] is True
-        assert mode["evaluation"]["seed"] == read_eval_json(run)["evaluation"]["seed"]
+        assert mode["evaluation"]["seed"] == TEST_SEED
         assert entry["mode"]["J_coll"]["values"] == [mode["summary"]["J_coll"]]
     markdown = (results / "table1.md").read_text()
     assert markdown == table_markdown(document)
@@ -69,7 +71,7 @@ def test_every_seed_is_written_beside_the_tables(tiny_experiments):
     markdown = (results / "seeds.md").read_text()
     assert markdown == seeds_markdown(documents)
     assert "| agent, seed | small_loop | zigzag | obstacle_loop |" in markdown
-    summary = read_eval_json(runs / "zigzag" / "PPO-C-a0.5-seed0")["summary"]
+    summary = read_eval_json(runs / "zigzag" / "PPO-C-a0.5-seed0", TEST_EVALUATION)["summary"]
     row = next(line for line in markdown.splitlines() if line.startswith("| PPO-C seed 0 |"))
     cell = row.split(" | ")[2]  # zigzag's: each constraint's number, then its interval
     assert re.sub(r" \([^)]*\)", "", cell).startswith(
@@ -87,8 +89,10 @@ def test_seed_cells_and_table_worked_example():
     entry = _entry(["r/CRLLK-D-a0.5-seed1", "r/CRLLK-D-a0.5-seed0"], [0.4, 0.1234], [0.03, 0.0],
                    [2.694, 2.8], [False, True])
     assert seed_cells(entry) == {1: "0.400 / 0.03 / 2.69 ✗", 0: "0.123 / 0.00 / 2.80 ✓"}
-    documents = {"table1": {"task": "small_loop", "agents": {"CRLLK-D": entry}},
-                 "table_zigzag": {"task": "zigzag", "agents": {
+    thresholds = {"lane": 0.5, "collision": 0.02}
+    documents = {"table1": {"task": "small_loop", "agents": {"CRLLK-D": entry},
+                            "thresholds": thresholds},
+                 "table_zigzag": {"task": "zigzag", "thresholds": thresholds, "agents": {
                      "PPO-D": _entry(["r/PPO-D-a0.5-seed0"], [0.1], [0.0], [2.0], [True])}}}
     assert seeds_table(documents) == [
         "| agent, seed | small_loop | zigzag |",
@@ -100,6 +104,44 @@ def test_seed_cells_and_table_worked_example():
                                                   "| --- | --- | --- |"]
     with pytest.raises(ValueError, match="does not end in -seed"):
         seed_cells(_entry(["r/CRLLK-D"], [0.1], [0.0], [2.0], [True]))
+
+
+def test_seed_cells_judge_the_upper_bound_too():
+    """With intervals and thresholds a second mark judges the 95 % upper bounds: seed 2's
+    J_coll 0.015 holds (≤ 0.02) but its interval reaches 0.034."""
+    entry = _entry(["r/X-seed0", "r/X-seed1", "r/X-seed2"], [0.1, 0.4, 0.2], [0.0, 0.03, 0.015],
+                   [2.0, 2.0, 2.0], [True, False, True])
+    entry["constraints"] = [{"name": "lane", "metric": "J_clane"},
+                            {"name": "collision", "metric": "J_coll"}]
+    entry["intervals"] = {"J_clane": [[0.08, 0.12], [0.35, 0.45], [0.15, 0.25]],
+                          "J_coll": [[0.0, 0.01], [0.01, 0.06], [0.006, 0.034]]}
+    cells = seed_cells(entry, {"lane": 0.5, "collision": 0.02})
+    assert cells == {0: "0.100 (0.08–0.12) / 0.00 (0.00–0.01) / 2.00 ✓ ✓",
+                     1: "0.400 (0.35–0.45) / 0.03 (0.01–0.06) / 2.00 ✗ ✗",
+                     2: "0.200 (0.15–0.25) / 0.01 (0.01–0.03) / 2.00 ✓ ✗"}
+    assert seed_cells(entry)[2].endswith("2.00 ✓")  # no thresholds: the point estimate only
+
+
+def test_direction_cells_worked_example():
+    """The episodes of each start direction judged apart: 3 of 100 intended episodes end on a
+    collision (0.03 > 0.02), none of the reverse ones."""
+    from crllk.evaluation.report import direction_results
+    from crllk.experiments.seeds import direction_cells
+
+    rows = [{"direction": "intended", "cost_lane": 0.4, "cost_collision": float(k < 3)}
+            for k in range(100)] + [{"direction": "reverse", "cost_lane": 0.1,
+                                     "cost_collision": 0.0}] * 100
+    document = {"episodes": rows, "constraints": [
+        {"name": "lane", "metric": "J_clane"}, {"name": "collision", "metric": "J_coll"}]}
+    result = direction_results(document)
+    assert result["intended"]["episodes"] == 100 and result["intended"]["J_coll"] == 0.03
+    low, high = result["intended"]["J_coll_interval"]
+    assert 0.010 < low < 0.011 and 0.084 < high < 0.085  # Wilson's, 3 of 100
+    entry = {"runs": ["r/X-seed4"], "by_direction": [result],
+             "constraints": document["constraints"]}
+    cells = direction_cells(entry, {"lane": 0.5, "collision": 0.02})
+    assert cells[4, "intended"] == "100 episodes: 0.400 (0.40–0.40) / 0.03 (0.01–0.08) ✗ ✗"
+    assert cells[4, "reverse"] == "100 episodes: 0.100 (0.10–0.10) / 0.00 (0.00–0.04) ✓ ✗"
 
 
 def test_tables_of_other_settings_leave_seeds_md_alone(tmp_path, capsys):
@@ -129,7 +171,7 @@ def test_a_second_invocation_reuses_finished_runs(tiny_experiments, tmp_path):
         text=True, timeout=300)
     assert completed.returncode == 0, completed.stderr
     assert "training 0 of 4 runs" in completed.stdout
-    assert "evaluating 0 of 4 runs" in completed.stdout
+    assert "test evaluation of 0 of 4 runs" in completed.stdout
     second = json.loads((tmp_path / "pixels" / "table1.json").read_text())
     assert (second["runs_trained"], second["evaluations_made"]) == (0, 0)
     assert second["agents"] == first["agents"]
@@ -154,14 +196,20 @@ def test_agents_choose_the_columns(tiny_experiments, tmp_path):
     assert rejected.returncode == 2 and "invalid choice: 'SAC'" in rejected.stderr
 
 
-def test_the_trainer_s_final_evaluation_is_not_played_again(tiny_experiments):
-    """The runs' final evaluation used crllk.evaluate's settings (episodes, seed and its ten
-    simulations): the experiment kept the trainer's eval.json and evaluated only the mode."""
+def test_runs_validate_on_the_validation_seed_and_the_tables_test_on_the_test_seed(
+        tiny_experiments):
+    """The trainer's evaluations (eval.csv, eval.json) use the validation seed; each finished
+    run is evaluated once more on the test seed, sampled and mode, and only that is tabulated."""
     runs, _, stdout = tiny_experiments
-    assert "evaluating 0 of 4 runs, and the deployed policy (mode) of 4" in stdout
+    assert "test evaluation of 4 of 4 runs, and of the deployed policy (mode) of 4" in stdout
     run = runs / "small_loop" / "CRLLK-D-a0.5-seed0"
-    assert read_eval_json(run)["evaluation"] == {"episodes": 2, "seed": 1_000_000,
+    assert read_eval_json(run)["evaluation"] == {"episodes": 2, "seed": VALIDATION_SEED,
                                                  "num_envs": 10, "deterministic": False}
+    assert read_eval_json(run, TEST_EVALUATION)["evaluation"] == {
+        "episodes": 2, "seed": TEST_SEED, "num_envs": 10, "deterministic": False}
+    assert "1000000" in (run / "config.yaml").read_text()
+    assert str(TEST_SEED) not in (run / "config.yaml").read_text()
+    assert str(TEST_SEED) not in (run / "eval.csv").read_text()
 
 
 def test_sweep_of_fixed_weights(tmp_path):
@@ -203,17 +251,16 @@ def test_a_finished_run_without_its_checkpoint_is_reused(tiny_experiments, tmp_p
     shutil.rmtree(kept / "checkpoints")
     assert (kept / POLICY_FILE).stat().st_size < 2_000_000
     assert trained_frames(kept) == 16
-    assert evaluation_is_current(kept, Settings(frames=16, episodes=2))
-    again = evaluate_run(kept, episodes=2, seed=read_eval_json(run)["evaluation"]["seed"],
-                         name="again")
-    assert again["summary"] == read_eval_json(run)["summary"]
+    assert evaluation_is_current(kept, Settings(frames=16, episodes=2), TEST_EVALUATION)
+    again = evaluate_run(kept, episodes=2, seed=TEST_SEED, name="again")
+    assert again["summary"] == read_eval_json(run, TEST_EVALUATION)["summary"]
     assert load_run_policy(kept).keys() == {"format", "iteration", "frames", "elapsed", "actor",
                                             "multipliers"}
     assert export.main([f"run={kept}", f"out={tmp_path / 'kept.onnx'}"]) == 0
     assert (tmp_path / "kept.onnx").stat().st_size > 0
     (kept / POLICY_FILE).unlink()
     assert trained_frames(kept) == 16  # from eval.json
-    assert evaluation_is_current(kept, Settings(frames=16, episodes=2))
+    assert evaluation_is_current(kept, Settings(frames=16, episodes=2), TEST_EVALUATION)
     assert trained_frames(tmp_path / "nothing") == 0
 
 
@@ -332,6 +379,7 @@ def test_a_table_from_a_sweep_run_by_hand(tmp_path):
          "CRLLK-D", "PPO-D", "--runs-root", str(runs), "--results", str(tmp_path / "results")],
         cwd=REPO, capture_output=True, text=True, timeout=600)
     assert table.returncode == 0, table.stdout[-2000:] + table.stderr[-2000:]
-    assert "training 0 of 2 runs" in table.stdout and "evaluating 0 of 2 runs" in table.stdout
+    assert "training 0 of 2 runs" in table.stdout
+    assert "test evaluation of 2 of 2 runs" in table.stdout  # once, on the test seed
     document = json.loads((tmp_path / "results" / "pixels" / "table1.json").read_text())
     assert list(document["agents"]) == ["CRLLK-D", "PPO-D"]

@@ -13,7 +13,8 @@ import crllk
 PACKAGE = Path(crllk.__file__).parent
 
 LAYERS = (
-    ("crllk.errors", "crllk.files", "crllk.paths", "crllk.settings", "crllk.cli", "crllk.images"),
+    ("crllk.errors", "crllk.files", "crllk.paths", "crllk.protocol", "crllk.settings", "crllk.cli",
+     "crllk.images"),
     ("crllk.maps",),
     ("crllk.sim",),
     ("crllk.tasks",),

@@ -22,6 +22,7 @@ from torchrl.envs.utils import ExplorationType, set_exploration_type, step_mdp
 
 from crllk.evaluation.report import episode_cost
 from crllk.files import atomic_write
+from crllk.protocol import TEST_EVALUATION
 from crllk.tasks.actions import DISCRETE_NAMES
 from crllk.training.build import build_env
 from crllk.training.runs import load_actor, load_run_config, read_eval_json, read_metrics
@@ -133,14 +134,14 @@ def figure1_data(by_threshold: Mapping[float, Sequence[Path]],
             frames, mean, low, high = seed_band(run_dirs, column)
             curves[column] = {"frames": frames.tolist(), "mean": mean.tolist(),
                               "min": low.tolist(), "max": high.tolist()}
-        episode = read_eval_json(run_dirs[0])["episodes"][0]
+        episode = read_eval_json(run_dirs[0], TEST_EVALUATION)["episodes"][0]
         data["thresholds"][f"{threshold:g}"] = {
             "runs": [str(d) for d in run_dirs], "curves": curves,
             "test_episode": {"run_dir": str(run_dirs[0]), "actions": episode["actions"],
                              "J_R": episode["distance"],
                              "J_clane": episode_cost(episode, "lane"),
                              "collisions": episode_cost(episode, "collision")},
-            "evaluations": [read_eval_json(d)["summary"] for d in run_dirs],
+            "evaluations": [read_eval_json(d, TEST_EVALUATION)["summary"] for d in run_dirs],
             "final_lambda_lane": [float(read_metrics(d)["lambda_lane"][-1]) for d in run_dirs]}
     return data
 

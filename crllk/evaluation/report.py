@@ -49,6 +49,29 @@ def constraint_intervals(document: dict[str, Any]) -> dict[str, list[float]]:
             for c in constraint_entries(document)}
 
 
+DIRECTIONS = ("intended", "reverse")
+"""The start directions of a loop whose obstacles block one of them (an episode row's
+``direction``)."""
+
+
+def direction_results(document: dict[str, Any]) -> dict[str, dict[str, Any]]:
+    """Per start direction (where the episode rows record one): how many episodes, each
+    constraint's metric and its 95 % interval (``"<metric>_interval"``), from the rows."""
+    rows = document.get("episodes") or []
+    out = {}
+    for direction in DIRECTIONS:
+        chosen = [row for row in rows if row.get("direction") == direction]
+        if len(chosen) < 2:
+            continue
+        entry: dict[str, Any] = {"episodes": len(chosen)}
+        for c in constraint_entries(document):
+            values = [episode_cost(row, c["name"]) for row in chosen]
+            entry[c["metric"]] = float(np.mean(values))
+            entry[f"{c['metric']}_interval"] = list(metric_interval(values))
+        out[direction] = entry
+    return out
+
+
 def metrics(document: dict[str, Any]) -> list[str]:
     """The metrics of a document's summary: J_R, each constraint's, the episode length."""
     return ["J_R", *(c["metric"] for c in constraint_entries(document)), "episode_length"]
@@ -142,6 +165,9 @@ def aggregate(documents: Sequence[dict[str, Any]]) -> dict[str, Any]:
     if all(intervals):
         out["intervals"] = {c["metric"]: [i[c["metric"]] for i in intervals]
                             for c in out["constraints"]}
+    directions = [direction_results(d) for d in documents]
+    if any(directions):
+        out["by_direction"] = directions
     return out
 
 

@@ -14,10 +14,11 @@ from crllk.envs.batched import make_env
 from crllk.envs.parallel import LaneKeepingEnv
 from crllk.evaluation.report import result_document
 from crllk.files import atomic_write_text
+from crllk.protocol import VALIDATION_SEED
 from crllk.rl.rollout import EvaluationResult, run_episodes
 from crllk.tasks.follower import FollowerGains, FollowerPolicy
 from crllk.training.build import build_env, build_eval_env
-from crllk.training.config import EVALUATION_SEED, TrainConfig, algo_thresholds
+from crllk.training.config import TrainConfig, algo_thresholds
 from crllk.training.run_dir import EVAL_RECORDING
 from crllk.training.runs import EVAL_FILE, load_actor, load_run_config
 
@@ -88,7 +89,7 @@ def write_final_evaluation(run_dir: Path, config: TrainConfig, env: LaneKeepingE
                                "num_envs": config.eval.num_envs, "deterministic": False})
 
 
-def evaluate_follower(task: str | Path, *, episodes: int, seed: int = EVALUATION_SEED,
+def evaluate_follower(task: str | Path, *, episodes: int, seed: int = VALIDATION_SEED,
                       num_envs: int = EVALUATION_ENVS, thresholds: dict[str, float] | None = None,
                       avoid_obstacles: bool = False, action: str = "duty",
                       margin: float = FollowerGains.avoid_margin) -> dict[str, Any]:

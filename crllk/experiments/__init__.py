@@ -10,11 +10,13 @@
 Every experiment trains its runs as trainer multiruns (``python -m crllk.train -m
 task=... seed=... resume=true``, one sweep per agent and setting, Hydra's joblib launcher running
 ``--jobs`` at a time, one per core; output in ``<runs-root>/sweeps.log``), so an interrupted
-experiment picks up where its runs stopped and finished runs are not trained again. Each run is
-then evaluated (:func:`crllk.evaluation.runs.evaluate_run`, as ``python -m crllk.evaluate``; an
-``eval.json`` of the same policy and settings is reused, as the one the trainer writes from its
-final evaluation, which the runs make with the experiment's episodes and seed; so is the policy
-it deploys, its mode, into ``eval-mode.json``, where the policy is there) and the results are
+experiment picks up where its runs stopped and finished runs are not trained again. The runs
+train with the trainer's validation evaluations (``eval.csv``, ``eval.json``: spawn seed
+1,000,000); each finished run is then evaluated once on the **test seed**
+(:mod:`crllk.protocol`, 400 episodes by default: ``test.json`` for the sampled policy,
+``test-mode.json`` for the deployed one, its mode, where the policy is there;
+:func:`crllk.evaluation.runs.evaluate_run`, as ``python -m crllk.evaluate``), and those test
+evaluations alone make the tables, which are
 written to ``results/<obs>/``: a Markdown table with the paper's numbers beside ours and the
 JSON behind it, or the figures, and ``seeds.md``, every seed of the tables' runs side by side
 (:mod:`crllk.experiments.seeds`). Runs live in ``results/runs/<obs>/<task>/`` and are kept in
@@ -127,7 +129,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--agents", nargs="+", choices=list(AGENTS), default=list(AGENTS),
                         help="table1 and maps: the agents to train and tabulate")
     parser.add_argument("--episodes", type=int, default=Settings.episodes,
-                        help="evaluation episodes per run")
+                        help="test episodes per run (on the test seed)")
     parser.add_argument("--obs", choices=("state", "pixels"), default=Settings.obs)
     parser.add_argument("--jobs", type=int, default=Settings.jobs, help="runs at a time")
     parser.add_argument("--runs-root", type=Path, default=Settings.runs_root,

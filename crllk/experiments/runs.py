@@ -18,7 +18,8 @@ from joblib import Parallel, delayed
 
 from crllk.evaluation.report import PAPER_CONSTRAINTS, format_summary
 from crllk.evaluation.runs import EVALUATION_ENVS, evaluate_run
-from crllk.training.config import EVALUATION_SEED, algo_thresholds
+from crllk.protocol import TEST_EPISODES, TEST_EVALUATION, TEST_MODE_EVALUATION, TEST_SEED
+from crllk.training.config import algo_thresholds
 from crllk.training.runs import (
     EVAL_FILE,
     has_policy,
@@ -52,9 +53,9 @@ SWEEP_LANE_WEIGHTS = (0.3, 1.0, 3.0)
 """Fixed λ_lane of the sweep's PPO-D runs (per dm of lane deviation)."""
 SWEEP_COLLISION_WEIGHTS = (1.0, 4.0, 16.0, 64.0)
 """Fixed λ_coll of the sweep's PPO-D runs (per collision)."""
-MODE_EVALUATION = "eval-mode"
-"""Each run's evaluation of its deployed policy (``<run>/eval-mode.json``): the policy's mode,
-the most probable action, as ``crllk.export`` writes it for the robot."""
+MODE_EVALUATION = TEST_MODE_EVALUATION
+"""Each run's test evaluation of its deployed policy (``<run>/test-mode.json``): the policy's
+mode, the most probable action, as ``crllk.export`` writes it for the robot."""
 
 
 @dataclass(frozen=True)
@@ -76,16 +77,18 @@ class RunSpec:
 
 @dataclass(frozen=True)
 class Settings:
-    """Budget and evaluation of an experiment."""
+    """Budget and evaluation of an experiment: its runs train (and choose nothing) on the
+    validation seed; its tables report their evaluation on ``eval_seed``, the test seed
+    (:mod:`crllk.protocol`), ``episodes`` per run."""
 
     frames: int = PIXEL_FRAMES
     seeds: tuple[int, ...] = (0, 1)
-    episodes: int = 100
+    episodes: int = TEST_EPISODES
     obs: str = "pixels"
     jobs: int = 2
     runs_root: Path = Path("results/runs")
     results: Path = Path("results")
-    eval_seed: int = EVALUATION_SEED
+    eval_seed: int = TEST_SEED
     command: str = ""
     train_overrides: tuple[str, ...] = ()
     agents: tuple[str, ...] = tuple(AGENTS)
@@ -125,12 +128,12 @@ def trained_frames(run_dir: Path) -> int:
     return 0
 
 
-def evaluation_is_current(run_dir: Path, settings: Settings, name: str | None = None,
+def evaluation_is_current(run_dir: Path, settings: Settings, name: str,
                           deterministic: bool = False) -> bool:
-    """Whether ``eval.json`` (or ``<name>.json``) evaluated the last policy with these settings
-    and ``crllk.evaluate``'s simulations (of the sampled policy, or with ``deterministic`` of
-    its mode): the trainer's final evaluation counts when its settings are these."""
-    path = run_dir / (EVAL_FILE if name is None else f"{name}.json")
+    """Whether ``<name>.json`` evaluated the last policy with these settings and
+    ``crllk.evaluate``'s simulations (of the sampled policy, or with ``deterministic`` of its
+    mode)."""
+    path = run_dir / f"{name}.json"
     if not path.is_file():
         return False
     document = json.loads(path.read_text())
@@ -182,8 +185,7 @@ def _sweep_command(specs: Sequence[RunSpec], settings: Settings) -> list[str]:
             f"task={values('task')}", f"seed={values('seed')}", f"obs={settings.obs}",
             f"algo.constraints.lane.threshold={spec.lane_threshold}",
             f"algo.constraints.collision.threshold={THRESHOLDS['collision']}",
-            f"total_frames={settings.frames}", f"eval.episodes={settings.episodes}",
-            f"eval.seed={settings.eval_seed}",
+            f"total_frames={settings.frames}",
             f"run_dir={settings.runs_root}/${{task.name}}/{name}-seed${{seed}}",
             "resume=true", "progress=false", "threads=1", "workers=1",
             f"hydra.launcher.n_jobs={settings.jobs}", *settings.train_overrides, *spec.extra]
@@ -209,7 +211,7 @@ def _child_env() -> dict[str, str]:
 
 def evaluate_runs(requests: Sequence[tuple[Path, dict[str, Any]]], settings: Settings) -> None:
     """Evaluates ``(run_dir, evaluate_run keyword arguments)`` pairs, ``jobs`` processes at a
-    time (joblib), each on the evaluation seed with ``settings.episodes`` episodes."""
+    time (joblib), each on the experiment's (test) seed with ``settings.episodes`` episodes."""
     Parallel(n_jobs=settings.jobs)(
         delayed(_evaluate)(run_dir, episodes=settings.episodes, seed=settings.eval_seed,
                            **kwargs) for run_dir, kwargs in requests)
@@ -224,7 +226,8 @@ def train_and_evaluate(specs: Sequence[RunSpec], settings: Settings,
                        policies: Sequence[RunSpec] = ()) -> Outcome:
     """Trains the unfinished runs (trainer multiruns), and those of ``policies`` that are
     finished but kept without a policy (trained again: their policy is needed); evaluates the
-    unevaluated ones; returns every evaluation."""
+    untested ones on the test seed (sampled policy and mode, once per finished run); returns
+    every test evaluation."""
     started = time.perf_counter()
     root = settings.runs_root
     to_train = [s for s in specs if trained_frames(s.directory(root)) < settings.frames
@@ -238,18 +241,19 @@ def train_and_evaluate(specs: Sequence[RunSpec], settings: Settings,
     if unfinished:
         raise RuntimeError("some runs did not finish (see " + str(log) + "):\n" + "\n".join(
             str(s.directory(root)) for s in unfinished))
-    to_evaluate = [s for s in specs if not evaluation_is_current(s.directory(root), settings)]
+    to_evaluate = [s for s in specs
+                   if not evaluation_is_current(s.directory(root), settings, TEST_EVALUATION)]
     for spec in specs:  # runs trained before the trainer kept its policy beside the checkpoints
         keep_policy(spec.directory(root))
     # the deployed policy of every run that has one
     modes = [s for s in specs if has_policy(s.directory(root))
              and not _mode_is_current(s.directory(root), settings)]
-    print(f"evaluating {len(to_evaluate)} of {len(specs)} runs, and the deployed policy (mode) "
-          f"of {len(modes)}", flush=True)
-    evaluate_runs([(s.directory(root), {}) for s in to_evaluate]
+    print(f"test evaluation of {len(to_evaluate)} of {len(specs)} runs, and of the deployed "
+          f"policy (mode) of {len(modes)}", flush=True)
+    evaluate_runs([(s.directory(root), {"name": TEST_EVALUATION}) for s in to_evaluate]
                   + [(s.directory(root), {"name": MODE_EVALUATION, "deterministic": True})
                      for s in modes], settings)
-    documents = {s: read_eval_json(s.directory(root)) for s in specs}
+    documents = {s: read_eval_json(s.directory(root), TEST_EVALUATION) for s in specs}
     mode_documents = {s: json.loads((s.directory(root) / f"{MODE_EVALUATION}.json").read_text())
                       for s in specs if _mode_is_current(s.directory(root), settings)}
     return Outcome(documents, time.perf_counter() - started, mode_documents,

@@ -16,8 +16,10 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+from crllk.evaluation.report import DIRECTIONS
 from crllk.experiments.runs import MAP_TASKS
 from crllk.files import atomic_write_text
+from crllk.protocol import TEST_SEED
 
 SEED_OF_RUN = re.compile(r"-seed(\d+)$")
 """The training seed at the end of a run directory's name (``CRLLK-D-a0.5-seed1``)."""
@@ -40,11 +42,13 @@ def table_documents(results: Path) -> dict[str, dict[str, Any]]:
     return {path.stem: json.loads(path.read_text()) for path in paths if path.exists()}
 
 
-def seed_cells(entry: Mapping[str, Any]) -> dict[int, str]:
+def seed_cells(entry: Mapping[str, Any], thresholds: Mapping[str, float] | None = None,
+               ) -> dict[int, str]:
     """``{seed: "J_clane / J_coll / J_R ✓"}`` of one agent's evaluations (an agent's entry of
     a table document, or its ``"mode"``): ✓ where every constraint held for that seed, ✗
     where one did not; each constraint's 95 % confidence interval in brackets where the entry
-    has them (:func:`crllk.evaluation.report.aggregate`)."""
+    has them (:func:`crllk.evaluation.report.aggregate`), and then, given the ``thresholds``
+    (by constraint name), a second mark: whether every interval's upper bound holds too."""
     intervals = entry.get("intervals", {})
     cells = {}
     for index, run in enumerate(entry["runs"]):
@@ -59,7 +63,40 @@ def seed_cells(entry: Mapping[str, Any]) -> dict[int, str]:
                 number += f" ({low:.{INTERVAL_DIGITS}f}–{high:.{INTERVAL_DIGITS}f})"
             numbers.append(number)
         mark = "✓" if entry["satisfied"][index] else "✗"
+        if thresholds is not None and intervals:
+            mark += " " + _mark(all(intervals[c["metric"]][index][1] <= thresholds[c["name"]]
+                                    for c in entry["constraints"]))
         cells[int(match.group(1))] = f"{' / '.join(numbers)} {mark}"
+    return cells
+
+
+def _mark(holds: bool) -> str:
+    return "✓" if holds else "✗"
+
+
+def direction_cells(entry: Mapping[str, Any], thresholds: Mapping[str, float],
+                    ) -> dict[tuple[int, str], str]:
+    """``{(seed, direction): "J_clane (interval) / J_coll (interval) ✓ ✗"}`` of an entry whose
+    runs kept their start directions: the constraints over the episodes that started in each
+    direction, judged on the point estimate and on the 95 % upper bound."""
+    cells = {}
+    for run, directions in zip(entry["runs"], entry.get("by_direction", []), strict=False):
+        match = SEED_OF_RUN.search(run)
+        if match is None:
+            raise ValueError(f"run directory {run!r} does not end in -seed<N>")
+        for direction, result in directions.items():
+            numbers, point, upper = [], True, True
+            for c in entry["constraints"]:
+                metric, bound = c["metric"], thresholds[c["name"]]
+                low, high = result[f"{metric}_interval"]
+                digits = dict(PER_SEED_METRICS).get(metric, 3)
+                numbers.append(f"{result[metric]:.{digits}f} ({low:.{INTERVAL_DIGITS}f}–"
+                               f"{high:.{INTERVAL_DIGITS}f})")
+                point &= result[metric] <= bound
+                upper &= high <= bound
+            cells[int(match.group(1)), direction] = (
+                f"{result['episodes']} episodes: {' / '.join(numbers)} "
+                f"{_mark(point)} {_mark(upper)}")
     return cells
 
 
@@ -74,7 +111,7 @@ def seeds_table(documents: Mapping[str, Mapping[str, Any]], mode: bool = False) 
             source = entry.get("mode") if mode else entry
             if source is None:
                 continue
-            for seed, cell in seed_cells(source).items():
+            for seed, cell in seed_cells(source, document["thresholds"]).items():
                 rows.setdefault((agent, seed), {})[task] = cell
     lines = ["| agent, seed | " + " | ".join(tasks) + " |", "| --- " * (len(tasks) + 1) + "|"]
     agents = list(dict.fromkeys(agent for agent, _ in rows))
@@ -99,26 +136,56 @@ def seeds_markdown(documents: Mapping[str, Mapping[str, Any]]) -> str:
                 theirs[key] != settings[key] for key in ("episodes", "eval_seed", "obs")):
             raise ValueError(f"{name}.json was evaluated with other thresholds or episodes "
                              f"than {next(iter(documents))}.json: no common table")
+    seed = settings["eval_seed"]
+    split = ("the test seed, used for nothing else" if seed == TEST_SEED
+             else "a validation seed, not the test protocol's")
     lines = [
         "# Every seed", "",
         f"Each cell is one training run: J_clane (dm, ≤ {thresholds['lane']}) / J_coll "
         f"(collisions per episode, ≤ {thresholds['collision']}) / J_R (m per episode), over "
-        f"{settings['episodes']} evaluation episodes from spawn seed {settings['eval_seed']} "
-        "(never a training seed); ✓ where both constraints hold for that run, ✗ where one "
+        f"{settings['episodes']} evaluation episodes from spawn seed {seed} ({split}; never "
+        "a training seed); ✓ where both constraints hold for that run, ✗ where one "
         "does not (judged on the numbers themselves). In brackets, where the tables keep them, "
         "the 95 % confidence interval of each constraint's metric over the run's episodes "
         "(Wilson's for J_coll, the fraction of episodes that end on a collision; the normal "
-        "interval of the mean for J_clane): how far the episodes pin the number down. "
+        "interval of the mean for J_clane): how far the episodes pin the number down; the "
+        "second mark says whether both upper bounds hold too. "
         f"Observation: `{settings['obs']}`. Written from "
         + ", ".join(f"`{name}.json`" for name in documents)
         + ", which give each table's command, budget and machine.", "",
         "## The sampled policy (the one the constraints are learned for)", "",
         *seeds_table(documents), ""]
-    if any("mode" in entry for document in documents.values()
-           for entry in document["agents"].values()):
+    with_mode = any("mode" in entry for document in documents.values()
+                    for entry in document["agents"].values())
+    if with_mode:
         lines += ["## The deployed policy (the most probable action, what `crllk.export` "
                   "writes)", "", *seeds_table(documents, mode=True), ""]
+    for document in documents.values():
+        if any("by_direction" in entry for entry in document["agents"].values()):
+            lines += [f"## By start direction: {document['task']}", "",
+                      "The obstacles of this map block one direction of the loop: the "
+                      "constraints over the episodes that started in each direction (J_clane "
+                      "/ J_coll with their 95 % intervals; marks: point estimate, upper "
+                      "bound).", "", *direction_table(document),
+                      *(["", *direction_table(document, mode=True)] if with_mode else []), ""]
     return "\n".join(lines)
+
+
+def direction_table(document: Mapping[str, Any], mode: bool = False) -> list[str]:
+    """A row per agent and seed, a column per start direction, of one table document's
+    runs (with ``mode``: of the deployed policies)."""
+    label = "deployed policy (mode)" if mode else "sampled policy"
+    lines = [f"| {label}: agent, seed | " + " | ".join(DIRECTIONS) + " |",
+             "| --- " * (len(DIRECTIONS) + 1) + "|"]
+    for agent, entry in document["agents"].items():
+        source = entry.get("mode") if mode else entry
+        if source is None or "by_direction" not in source:
+            continue
+        cells = direction_cells(source, document["thresholds"])
+        for seed in sorted({seed for seed, _ in cells}):
+            lines.append(f"| {agent} seed {seed} | " + " | ".join(
+                cells.get((seed, d), "—") for d in DIRECTIONS) + " |")
+    return lines
 
 
 def write_seeds(results: Path) -> Path | None:

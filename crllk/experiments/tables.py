@@ -15,6 +15,7 @@ from crllk.evaluation.runs import evaluate_follower
 from crllk.experiments.runs import PAPER_J_R_PER_METRE, THRESHOLDS, Outcome, Settings
 from crllk.experiments.seeds import write_seeds
 from crllk.files import atomic_write_text
+from crllk.protocol import TEST_SEED
 
 
 def agent_results(outcome: Outcome, task: str, agents: Sequence[str],
@@ -71,6 +72,12 @@ def verdicts(results: dict[str, dict[str, Any]], constrained: Sequence[str],
                 misses.append(f"{c['metric']} by {value - bound:.3f}{unit}")
         per_seed = ", ".join("yes" if s else "no" for s in entry["satisfied"])
         held = "both hold per seed" if len(constraints) == 2 else "all hold per seed"
+        intervals = entry.get("intervals")
+        if intervals:
+            upper = [all(intervals[c["metric"]][k][1] <= thresholds[c["name"]]
+                         for c in constraints) for k in range(len(entry["satisfied"]))]
+            per_seed += "; at the 95 % upper bound: " + ", ".join(
+                "yes" if u else "no" for u in upper)
         name = f"{agent}'s deployed policy (mode)" if mode else agent
         if misses:
             lines.append(f"- {name} misses on average: {'; '.join(misses)} "
@@ -153,7 +160,10 @@ def table_markdown(document: dict[str, Any]) -> str:
            else f"{settings['jobs']} runs at a time)."),
         f"- Evaluation: {settings['episodes']} episodes per run of the sampled policy (the one "
         f"the constraints are learned for), spawn and sampling seed {settings['eval_seed']} "
-        "(never a training seed), the last checkpoint" + (
+        + ("(the test seed: evaluated once per finished run, never used to choose a setting)"
+           if settings["eval_seed"] == TEST_SEED else
+           "(a validation seed, not the test protocol's; never a training seed)")
+        + ", the last checkpoint" + (
             "; the rows marked *deployed policy (mode)* play the same episodes with the most "
             "probable action, the policy `crllk.export` writes for the robot." if with_mode
             else "."),

@@ -18,6 +18,7 @@ from typing import Any
 from hydra.core.config_store import ConfigStore
 from omegaconf import DictConfig, OmegaConf
 
+from crllk.protocol import VALIDATION_EPISODES, VALIDATION_SEED
 from crllk.rl.model_config import ModelConfig
 from crllk.settings import (
     host_port,
@@ -27,6 +28,7 @@ from crllk.settings import (
     parse,
     positive,
     setting,
+    spawn_seed,
     tcp_port,
     unit_interval,
 )
@@ -37,8 +39,6 @@ SOURCE = "override"
 SCHEMA_NAME = "train_schema"
 """The name under which :class:`TrainConfig` is stored in Hydra's ConfigStore."""
 CONF_DIR = Path(__file__).resolve().parent.parent / "conf"
-EVALUATION_SEED = 1_000_000
-"""Spawn (and sampling) seed of evaluations, far from every training seed."""
 CLUSTER_EXTRA = "the cluster extra: pip install -e '.[cluster]'"
 """What installs Ray and the cluster launchers."""
 
@@ -173,12 +173,13 @@ class EvalConfig:
     final: bool = True
     """An evaluation at the end of training: the last row of ``eval.csv``, and the run's
     ``eval.json`` from ``python -m crllk.train``."""
-    episodes: int = setting(100, check=positive)
+    episodes: int = setting(VALIDATION_EPISODES, check=positive)
     """Episodes of the sampled policy each time: the same as ``python -m crllk.evaluate``."""
     num_envs: int = setting(10, check=positive)
     """Episode k runs in simulation k mod num_envs, as ``crllk.evaluate``'s default."""
-    seed: int = setting(EVALUATION_SEED, check=non_negative)
-    """Spawn seed of the evaluation environment (apart from training seeds)."""
+    seed: int = setting(VALIDATION_SEED, check=spawn_seed)
+    """Spawn seed of the evaluation environment: a validation seed, apart from the training
+    seeds (the test seed is refused: :mod:`crllk.protocol`)."""
 
 
 @dataclass
@@ -190,7 +191,7 @@ class TrainConfig:
     algo: AlgoConfig = field(default_factory=AlgoConfig)
     action: ActionConfig = field(default_factory=ActionConfig)
     obs: ObsConfig = field(default_factory=ObsConfig)
-    seed: int = setting(0, check=non_negative)
+    seed: int = setting(0, check=spawn_seed)
     total_frames: int = setting(500_000, check=positive)
     """Environment steps (summed over sub-environments) to train for (``obs=state``: 300,000)."""
     run_dir: str | None = None
@@ -326,5 +327,5 @@ def upgrade(stored: DictConfig) -> DictConfig:
     return stored
 
 
-__all__ = ["CLUSTER_EXTRA", "EVALUATION_SEED", "ConstraintConfig", "TrainConfig",
+__all__ = ["CLUSTER_EXTRA", "ConstraintConfig", "TrainConfig",
            "algo_thresholds", "register_schema", "upgrade", "validate"]

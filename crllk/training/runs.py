@@ -134,9 +134,11 @@ def read_evaluations(run_dir: str | Path) -> dict[str, np.ndarray]:
     return read_csv(Path(run_dir) / "eval.csv")
 
 
-def read_eval_json(run_dir: str | Path) -> dict[str, Any]:
-    """``eval.json`` as written by ``python -m crllk.evaluate``."""
-    return json.loads((Path(run_dir) / EVAL_FILE).read_text())
+def read_eval_json(run_dir: str | Path, name: str | None = None) -> dict[str, Any]:
+    """``eval.json`` as written by ``python -m crllk.evaluate`` (or ``<name>.json``, e.g. the
+    test evaluation ``test.json``)."""
+    return json.loads((Path(run_dir) / (EVAL_FILE if name is None else f"{name}.json"))
+                      .read_text())
 
 
 def _number(text: str | None) -> float:
