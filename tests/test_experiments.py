@@ -383,3 +383,28 @@ def test_a_table_from_a_sweep_run_by_hand(tmp_path):
     assert "test evaluation of 2 of 2 runs" in table.stdout  # once, on the test seed
     document = json.loads((tmp_path / "results" / "pixels" / "table1.json").read_text())
     assert list(document["agents"]) == ["CRLLK-D", "PPO-D"]
+
+
+def test_teacher_ablation(tmp_path):
+    """Three teacher variants on both maps from state at the tiny budget: every run trained
+    with its overrides, tested on the test seed, and the Markdown rebuilt from the JSON."""
+    from crllk.experiments.teacher import TEACHER_VARIANTS, teacher_markdown
+
+    completed = subprocess.run(
+        [sys.executable, "-m", "crllk.experiments", "teacher", *TINY_EXPERIMENT, "--obs",
+         "state", "--runs-root", str(tmp_path / "runs"), "--results", str(tmp_path / "results")],
+        cwd=REPO, capture_output=True, text=True, timeout=600)
+    assert completed.returncode == 0, completed.stdout[-2000:] + completed.stderr[-2000:]
+    results = tmp_path / "results" / "state"
+    document = json.loads((results / "teacher.json").read_text())
+    assert list(document["maps"]) == ["obstacle_loop", "small_loop"]
+    for variants in document["maps"].values():
+        assert list(variants) == list(TEACHER_VARIANTS)
+        assert all("mode" in entry for entry in variants.values())
+    assert (results / "teacher.md").read_text() == teacher_markdown(document)
+    runs = tmp_path / "runs" / "state" / "small_loop"
+    assert "coeff: 0.0" in (runs / "CRLLK-D-noteacher-a0.5-seed0" / "config.yaml").read_text()
+    annealed = (runs / "CRLLK-D-teacher0-a0.5-seed0" / "config.yaml").read_text()
+    assert "final: 0.0" in annealed and "frames: 400000" in annealed
+    test = read_eval_json(runs / "CRLLK-D-teacher0-a0.5-seed0", TEST_EVALUATION)
+    assert test["evaluation"]["seed"] == TEST_SEED

@@ -5,6 +5,7 @@
     python -m crllk.experiments figure1   # CRLLK-D on small_loop with alpha_1 = 0.5 and 0.75
     python -m crllk.experiments sweep     # fixed-weight PPO-D over a grid of weights, every map
     python -m crllk.experiments robustness  # CRLLK-D with and without randomisation, held out
+    python -m crllk.experiments teacher   # CRLLK-D with the teacher's floor, annealed, none
     python -m crllk.experiments all       # table1, maps and figure1
 
 Every experiment trains its runs as trainer multiruns (``python -m crllk.train -m
@@ -53,6 +54,7 @@ from crllk.experiments.runs import (
 )
 from crllk.experiments.sweep import sweep, sweep_markdown, sweep_specs
 from crllk.experiments.tables import settings_dict, table_markdown, write_table
+from crllk.experiments.teacher import teacher
 from crllk.files import write_problem
 from crllk.training.compose import compose_config
 from crllk.training.config import validate
@@ -97,7 +99,7 @@ def figure1(settings: Settings) -> list[Path]:
 
 
 EXPERIMENTS = {"table1": table1, "maps": maps, "figure1": figure1, "sweep": sweep,
-               "robustness": robustness}
+               "robustness": robustness, "teacher": teacher}
 ALL = ("table1", "maps", "figure1")
 """What ``all`` runs (the sweep is asked for by name)."""
 
