@@ -15,6 +15,7 @@ from crllk.envs.parallel import LaneKeepingEnv
 from crllk.evaluation.report import result_document
 from crllk.files import atomic_write_text
 from crllk.protocol import VALIDATION_SEED
+from crllk.rl.import_probes import settle_import_probes
 from crllk.rl.rollout import EvaluationResult, run_episodes
 from crllk.tasks.follower import FollowerGains, FollowerPolicy
 from crllk.training.build import build_env, build_eval_env
@@ -36,6 +37,7 @@ def evaluate_run(run_dir: str | Path, *, episodes: int, deterministic: bool = Fa
     (e.g. ``{"randomize": {...}}`` or ``{"camera": {"robot_frames": True}}``); the
     simulations step in the run's ``workers`` processes, or in ``workers`` (the same
     episodes either way)."""
+    settle_import_probes()
     config = load_run_config(run_dir)
     if workers is not None:
         config.workers = workers
