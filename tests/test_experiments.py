@@ -54,13 +54,33 @@ def test_map_tables_and_figure1_are_written(tiny_experiments):
         document = json.loads((results / f"table_{task}.json").read_text())
         assert list(document["agents"]) == list(AGENTS) and document["task"] == task
     figure = json.loads((results / "figure1.json").read_text())
-    assert list(figure["thresholds"]) == ["0.5", "0.75"]
+    assert list(figure["thresholds"]) == ["0.08", "0.12", "0.2", "0.5"]
     for entry in figure["thresholds"].values():
         assert entry["curves"]["lambda_lane"]["frames"] == [16.0]  # one 16-frame iteration
         assert sum(entry["test_episode"]["actions"].values()) > 0
-    for name in ("figure1_curves.png", "figure1_actions.png"):
+    for name in ("figure1_curves.png", "figure1_actions.png", "figure1_tradeoff.png"):
         assert (results / name).read_bytes()[:4] == b"\x89PNG"
-    assert (runs / "small_loop" / "CRLLK-D-a0.75-seed0" / "eval.json").exists()
+    assert (runs / "small_loop" / "CRLLK-D-a0.08-seed0" / "eval.json").exists()
+    config = (runs / "small_loop" / "CRLLK-D-a0.08-seed0" / "config.yaml").read_text()
+    assert "threshold: 0.08" in config
+
+
+def test_figure1_tradeoff_sets_crllk_against_the_sweep():
+    """Each α1's seeds and mean, and every fixed-weight pair of the sweep's small_loop."""
+    from crllk.analysis.figures import draw_figure1_tradeoff
+
+    sweep = json.loads((REPO / "results/state/sweep.json").read_text())
+    data = {"thresholds": {"0.1": {"evaluations": [{"J_clane": 0.09, "J_R": 2.5},
+                                                   {"J_clane": 0.11, "J_R": 2.6}]},
+                           "0.5": {"evaluations": [{"J_clane": 0.2, "J_R": 2.8}]}}}
+    figure = draw_figure1_tradeoff(data, sweep)
+    ax = figure.axes[0]
+    fixed = len(sweep["maps"]["small_loop"]["fixed"])
+    assert len(ax.collections) == fixed + 2 * 2 + 1  # the legend's grey marker too
+    stars = [c.get_offsets().tolist() for c in ax.collections[fixed:]]
+    assert [[0.1, 2.55]] in [[[round(x, 6), round(y, 6)] for x, y in o] for o in stars]
+    assert [line.get_xdata()[0] for line in ax.lines] == [0.1, 0.5]
+    assert len(draw_figure1_tradeoff(data, None).axes[0].collections) == 4
 
 
 def test_every_seed_is_written_beside_the_tables(tiny_experiments):

@@ -178,18 +178,54 @@ def draw_figure1_actions(data: Mapping[str, Any]) -> Any:
     return figure
 
 
+def draw_figure1_tradeoff(data: Mapping[str, Any], sweep: Mapping[str, Any] | None) -> Any:
+    """J_R against J_clane: CRLLK-D for every α1 (each seed a dot, their mean a star, α1 a
+    dashed line of the same colour) and, where ``sweep`` (a sweep document of the same
+    observation with ``small_loop``) is given, the fixed-weight PPO-D pairs (filled where both
+    constraints hold on every seed)."""
+    colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    figure, ax = plt.subplots(figsize=(6.0, 4.2), constrained_layout=True)
+    fixed = (sweep or {}).get("maps", {}).get("small_loop", {}).get("fixed", [])
+    for e in fixed:
+        holds = e["satisfied_all_seeds"]
+        ax.scatter([e["J_clane"]["mean"]], [e["J_R"]["mean"]], s=30, color="grey",
+                   facecolors="grey" if holds else "none")
+        ax.annotate(f"{e['lane_weight']:g}/{e['collision_weight']:g}",
+                    (e["J_clane"]["mean"], e["J_R"]["mean"]), fontsize=6, color="grey",
+                    xytext=(3, 3), textcoords="offset points")
+    for k, (threshold, entry) in enumerate(data["thresholds"].items()):
+        color = colors[k % len(colors)]
+        lane = [e["J_clane"] for e in entry["evaluations"]]
+        travel = [e["J_R"] for e in entry["evaluations"]]
+        ax.scatter(lane, travel, s=14, color=color)
+        ax.scatter([float(np.mean(lane))], [float(np.mean(travel))], s=150, marker="*",
+                   color=color, label=f"CRLLK-D, α1 = {threshold} dm")
+        ax.axvline(float(threshold), color=color, linestyle="--", linewidth=1)
+    if fixed:
+        ax.scatter([], [], s=30, color="grey", label="PPO-D, fixed λ_lane/λ_coll (filled: holds)")
+    ax.set_xlabel("J_clane (dm)")
+    ax.set_ylabel("J_R (m per episode)")
+    ax.legend(fontsize=7, loc="lower right")
+    ax.set_title("small_loop: the lane constraint against travel", fontsize=10)
+    return figure
+
+
 def figure1_pictures(by_threshold: Mapping[float, Sequence[Path]], results: Path,
-                     settings: Mapping[str, Any]) -> list[Path]:
-    """Writes ``figure1.json`` (the numbers) and the two PNGs drawn from it."""
+                     settings: Mapping[str, Any],
+                     sweep: Mapping[str, Any] | None = None) -> list[Path]:
+    """Writes ``figure1.json`` (the numbers) and the three PNGs drawn from it (the trade-off
+    with the fixed-weight ``sweep``'s ``small_loop`` pairs where given)."""
     data = figure1_data(by_threshold, settings)
     results.mkdir(parents=True, exist_ok=True)
     numbers = results / "figure1.json"
     atomic_write(numbers, lambda handle: handle.write(json.dumps(data, indent=1).encode()))
     return [numbers, save_figure(draw_figure1_curves(data), results / "figure1_curves.png"),
-            save_figure(draw_figure1_actions(data), results / "figure1_actions.png")]
+            save_figure(draw_figure1_actions(data), results / "figure1_actions.png"),
+            save_figure(draw_figure1_tradeoff(data, sweep), results / "figure1_tradeoff.png")]
 
 
-__all__ = ["draw_figure1_actions", "draw_figure1_curves", "figure1_data", "figure1_pictures",
+__all__ = ["draw_figure1_actions", "draw_figure1_curves", "draw_figure1_tradeoff",
+           "figure1_data", "figure1_pictures",
            "moving_average", "plot_action_distribution", "policy_trajectory", "save_figure",
            "seed_band"]
 

@@ -2,7 +2,7 @@
 
     python -m crllk.experiments table1    # CRLLK-D, PPO-D, CRLLK-C, PPO-C on small_loop
     python -m crllk.experiments maps      # the same four agents on zigzag and obstacle_loop
-    python -m crllk.experiments figure1   # CRLLK-D on small_loop with alpha_1 = 0.5 and 0.75
+    python -m crllk.experiments figure1   # CRLLK-D on small_loop, alpha_1 = 0.08 ... 0.5 dm
     python -m crllk.experiments sweep     # fixed-weight PPO-D over a grid of weights, every map
     python -m crllk.experiments robustness  # CRLLK-D with and without randomisation, held out
     python -m crllk.experiments teacher   # CRLLK-D with the teacher's floor, annealed, none
@@ -28,6 +28,7 @@ evaluated again and exported, where its checkpoints are gone.
 
 from __future__ import annotations
 
+import json
 import shlex
 import sys
 from collections.abc import Sequence
@@ -91,11 +92,14 @@ def figure1(settings: Settings) -> list[Path]:
     from crllk.analysis.figures import figure1_pictures  # matplotlib only when drawing
 
     specs = [RunSpec("CRLLK-D", "small_loop", seed, threshold)
-             for threshold in FIGURE_THRESHOLDS for seed in settings.seeds]
+             for threshold in settings.figure_thresholds for seed in settings.seeds]
     train_and_evaluate(specs, settings)
     by_threshold = {t: [s.directory(settings.runs_root) for s in specs if s.lane_threshold == t]
-                    for t in FIGURE_THRESHOLDS}
-    return figure1_pictures(by_threshold, settings.results, settings_dict(settings))
+                    for t in settings.figure_thresholds}
+    sweep_path = settings.results / "sweep.json"
+    sweep_document = json.loads(sweep_path.read_text()) if sweep_path.is_file() else None
+    return figure1_pictures(by_threshold, settings.results, settings_dict(settings),
+                            sweep_document)
 
 
 EXPERIMENTS = {"table1": table1, "maps": maps, "figure1": figure1, "sweep": sweep,
@@ -145,6 +149,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--collision-weights", type=float, nargs="+",
                         default=list(SWEEP_COLLISION_WEIGHTS),
                         help="sweep: fixed lambda_coll values")
+    parser.add_argument("--thresholds", type=float, nargs="+",
+                        default=list(FIGURE_THRESHOLDS),
+                        help="figure1: the alpha_1 values (dm) of the CRLLK-D runs")
     parser.add_argument("--robust-tasks", nargs="+", default=list(Settings.robust_tasks),
                         help="robustness: the maps")
     parser.add_argument("--conditions", nargs="+", default=[], choices=list(conditions()),
@@ -157,6 +164,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     for name in ("frames", "episodes", "jobs"):
         if getattr(args, name) < 1:
             parser.error(f"--{name} must be at least 1, got {getattr(args, name)}")
+    if not all(0 < t < float("inf") for t in args.thresholds):
+        parser.error(f"--thresholds must be finite numbers above 0, got {args.thresholds}")
     command = "python -m crllk.experiments " + shlex.join(sys.argv[1:] if argv is None else argv)
     settings = Settings(frames=args.frames, seeds=tuple(args.seeds), episodes=args.episodes,
                         obs=args.obs, jobs=args.jobs, runs_root=args.runs_root / args.obs,
@@ -166,6 +175,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                         lane_weights=tuple(args.lane_weights),
                         collision_weights=tuple(args.collision_weights),
                         robust_tasks=tuple(args.robust_tasks),
+                        figure_thresholds=tuple(args.thresholds),
                         conditions=tuple(args.conditions))
     check_settings(settings)
     names = list(ALL) if args.experiment == "all" else [args.experiment]

@@ -45,7 +45,9 @@ PAPER_TABLE1 = {
 PAPER_J_R_PER_METRE = 30.0
 """The original reward summed speed x cos(heading) per 30 Hz step: about 30 per metre."""
 MAP_TASKS = ("zigzag", "obstacle_loop")
-FIGURE_THRESHOLDS = (0.5, 0.75)
+FIGURE_THRESHOLDS = (0.08, 0.12, 0.2, 0.5)
+"""alpha_1 (dm) of Figure 1's CRLLK-D runs: values that bind on small_loop (its runs at 0.5
+deviate about 0.15–0.2 dm), and the paper's 0.5."""
 PIXEL_FRAMES, STATE_FRAMES = 500_000, 300_000
 """Default frames per run: the trainer's own defaults for each observation."""
 SWEEP_TASKS = ("small_loop", "zigzag", "obstacle_loop")
@@ -96,6 +98,8 @@ class Settings:
     sweep_tasks: tuple[str, ...] = SWEEP_TASKS
     lane_weights: tuple[float, ...] = SWEEP_LANE_WEIGHTS
     collision_weights: tuple[float, ...] = SWEEP_COLLISION_WEIGHTS
+    figure_thresholds: tuple[float, ...] = FIGURE_THRESHOLDS
+    """alpha_1 values (dm) of Figure 1's runs."""
     robust_tasks: tuple[str, ...] = ("small_loop", "zigzag")
     """The maps of the robustness experiment."""
     conditions: tuple[str, ...] = ()
