@@ -8,6 +8,8 @@ import re
 import statistics
 from pathlib import Path
 
+import pytest
+
 REPO = Path(__file__).resolve().parents[1]
 README = (REPO / "README.md").read_text()
 WALL_TIME = REPO / "results/runs/pixels/obstacle_loop/default-command-alone/wall-time.txt"
@@ -28,20 +30,21 @@ def test_the_default_command_times_are_the_committed_ones():
     assert f"({first / newest:.2f}x)" in README
 
 
-def test_the_pixel_training_row_is_the_committed_rounds():
-    rounds: dict[str, list[float]] = {"base": [], "main": []}
+@pytest.mark.parametrize("row", ["training, pixels (frames/s)", "training, state (frames/s)"])
+def test_the_training_rows_are_the_committed_rounds(row):
+    rounds: dict[str, list[float]] = {"base": [], "main": [], "prev": []}
     who = None
     for line in ROUNDS.read_text().splitlines():
         if line.startswith("== round"):
             who = line.split()[3]
-        elif line.startswith("training, pixels (frames/s)"):
+        elif line.startswith(row):
             rounds[who].append(float(line.split()[3]))
-    assert len(rounds["base"]) == len(rounds["main"]) == 4
+    assert len(rounds["base"]) == len(rounds["main"]) == 8
     ratios = [m / b for b, m in zip(rounds["base"], rounds["main"], strict=True)]
     cells = (", ".join(f"{x:.0f}" for x in rounds["base"]),
              ", ".join(f"{x:.0f}" for x in rounds["main"]),
              ", ".join(f"{r:.2f}" for r in ratios), f"{statistics.median(ratios):.2f}")
-    assert "| training, pixels (frames/s) | " + " | ".join(cells) + " |" in README
+    assert f"| {row} | " + " | ".join(cells) + " |" in README
 
 
 def test_the_default_command_s_results_are_the_committed_ones():
