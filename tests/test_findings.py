@@ -30,3 +30,30 @@ def test_the_default_command_s_directions_are_its_evaluation():
     text = " ".join(FINDINGS.split())
     assert (f"**{intended['J_clane']:.3f} dm** and {intended['J_coll']:.3f} over the "
             f"{intended['episodes']} intended episodes") in text
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_the_annealed_teacher_table_is_the_runs(seed):
+    import csv
+
+    run = REPO / f"results/runs/pixels/obstacle_loop/CRLLK-D-teacher0-a0.5-seed{seed}"
+    with (run / "metrics.csv").open() as handle:
+        rows = list(csv.DictReader(handle))
+
+    def training_j_coll(low: int, high: int) -> float:
+        values = [float(r["J_coll"]) for r in rows
+                  if low <= int(r["frames"]) < high and r["J_coll"] not in ("nan", "")]
+        return sum(values) / len(values)
+
+    table = {line.split(" | ")[0].strip("| "): line.strip("|").split(" | ")[1:]
+             for line in FINDINGS.splitlines() if line.startswith("| training J_coll")
+             or line.startswith("| λ_coll at the end") or line.startswith("| validation J_coll")}
+    column = seed
+    assert table["training J_coll, frames 200k–350k (weight 0.5 → 0.13)"][column].strip() == \
+        f"{training_j_coll(200_000, 350_000):.3f}"
+    assert table["training J_coll, frames 400k–500k (weight 0)"][column].strip() == \
+        f"{training_j_coll(400_000, 600_000):.3f}"
+    multiplier = float(rows[-1]["lambda_collision"])
+    assert table["λ_coll at the end"][column].strip() == f"{multiplier:.1f}"
+    final = json.loads((run / "eval.json").read_text())["summary"]["J_coll"]
+    assert table["validation J_coll at the end (100 episodes)"][column].strip() == f"{final:.2f}"
