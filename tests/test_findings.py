@@ -57,3 +57,25 @@ def test_the_annealed_teacher_table_is_the_runs(seed):
     assert table["λ_coll at the end"][column].strip() == f"{multiplier:.1f}"
     final = json.loads((run / "eval.json").read_text())["summary"]["J_coll"]
     assert table["validation J_coll at the end (100 episodes)"][column].strip() == f"{final:.2f}"
+
+
+def test_the_collision_critic_traces_are_the_runs():
+    import csv
+
+    def mean(run: str, column: str, low: int, high: int) -> float:
+        with (REPO / "results/runs/pixels/obstacle_loop" / run / "metrics.csv").open() as f:
+            values = [float(r[column]) for r in csv.DictReader(f)
+                      if low <= int(r["frames"]) < high and r[column] not in ("nan", "")]
+        return sum(values) / len(values)
+
+    runs = ["CRLLK-D-teacher0-a0.5-seed0", "CRLLK-D-teacher0-a0.5-seed1"]
+    variance = [f"{mean(r, 'explained_variance_collision', 200_000, 350_000):.2f}"
+                for r in [*runs, "default-command-alone"]]
+    assert "| explained variance of the collision critic, 200k–350k | " + \
+        " | ".join(variance) + " |" in FINDINGS
+    straight = [f"{mean(r, 'action_straight', 200_000, 350_000):.2f} → "
+                f"{mean(r, 'action_straight', 400_000, 600_000):.2f}" for r in runs]
+    assert " | ".join(straight) in FINDINGS
+    kl = [f"{mean(r, 'kl_approx', 200_000, 350_000):.4f} → "
+          f"{mean(r, 'kl_approx', 450_000, 600_000):.4f}" for r in runs]
+    assert " | ".join(kl) in FINDINGS
