@@ -191,3 +191,24 @@ def test_an_evaluation_under_changed_task_settings_goes_to_its_own_file(tmp_path
     assert changed["evaluation"]["task_overrides"] == {"camera": {"robot_frames": True},
                                                        "randomize": "default"}
     assert changed["episodes"] != nominal["episodes"]
+
+
+def test_cost_critic_fit_over_whole_batches(tiny_run, tmp_path):
+    """The cost-critic diagnostic restores the run, collects, and writes its JSON; bad input
+    is one line."""
+    import shutil
+
+    from crllk.analysis import cost_critics
+
+    run = tmp_path / "run"
+    shutil.copytree(tiny_run, run)
+    assert cost_critics.main([str(run), "--batches", "2"]) == 0
+    fit = json.loads((run / "cost-critic-collision.json").read_text())
+    assert fit["frames"] == 2 * 16 and fit["cost_steps"] >= 0 and fit["constraint"] == "collision"
+    assert -1.0 <= fit["correlation"] <= 1.0 or np.isnan(fit["correlation"])
+    for argv, message in (([str(tmp_path / "none")], "no such run directory"),
+                          ([str(run), "--constraint", "speed"], "is not a constraint")):
+        completed = subprocess.run([sys.executable, "-m", "crllk.analysis.cost_critics", *argv],
+                                   capture_output=True, text=True, timeout=120)
+        assert completed.returncode == 2 and message in completed.stderr
+        assert len(completed.stderr.strip().splitlines()) == 1
