@@ -1,5 +1,5 @@
 # Two commands set up everything on a fresh machine:
-#   make train  install into .venv and train CRLLK-D from the camera on small_loop (about 15
+#   make train  install into .venv and train CRLLK-D from the camera on small_loop (about 10
 #               minutes on 2 cores, its final evaluation included); the run lands in
 #               runs/small_loop/crllk-discrete-pixels-seed0
 #   make test   install into .venv and run the test suite

@@ -86,3 +86,18 @@ def test_the_collision_critic_traces_are_the_runs():
     logged = [f"{mean(r, 'explained_variance_collision', 200_000, 350_000):.2f}"
               for r in [*runs, "default-command-alone"]]
     assert ", ".join(logged[:2]) + " and " + logged[2] in " ".join(FINDINGS.split())
+
+
+def test_the_readme_s_training_aids_quote_the_runs():
+    readme = " ".join((REPO / "README.md").read_text().split())
+    root = REPO / "results/runs/pixels/obstacle_loop"
+    final = sorted(json.loads((root / f"CRLLK-D-teacher0-a0.5-seed{s}" / "eval.json").read_text())
+                   ["summary"]["J_coll"] for s in (0, 1))
+    assert f"collapses to J_coll {final[0]:.2f} and {final[1]:.2f}" in readme
+    intended = json.loads((root / "default-command-alone" / "eval.json").read_text())[
+        "breakdown"]["by_direction"]["intended"]
+    assert (f"the default run's {intended['episodes']} episodes started that way deviate "
+            f"{intended['J_clane']:.3f} dm") in readme
+    teacher = json.loads((REPO / "results/scripted/teacher-obstacle_loop-margin0.07.json")
+                         .read_text())["teacher"]["breakdown"]["by_direction"]["intended"]
+    assert f"even the privileged teacher spends {teacher['J_clane']:.2f} dm there" in readme
