@@ -101,3 +101,13 @@ def test_the_readme_s_training_aids_quote_the_runs():
     teacher = json.loads((REPO / "results/scripted/teacher-obstacle_loop-margin0.07.json")
                          .read_text())["teacher"]["breakdown"]["by_direction"]["intended"]
     assert f"even the privileged teacher spends {teacher['J_clane']:.2f} dm there" in readme
+
+
+def test_the_annealed_small_loop_runs_are_quoted_as_they_ended():
+    text = " ".join(FINDINGS.split())
+    root = REPO / "results/runs/pixels/small_loop"
+    seeds = [json.loads((root / f"CRLLK-D-teacher0-a0.5-seed{s}" / "eval.json").read_text())
+             ["summary"] for s in (0, 1)]
+    assert (f"seed 0 at J_clane {seeds[0]['J_clane']:.3f} dm and J_coll {seeds[0]['J_coll']:.2f}"
+            f" (validation), seed 1 at {seeds[1]['J_clane']:.3f} dm and "
+            f"{seeds[1]['J_coll']:.2f}") in text
