@@ -69,9 +69,7 @@ class LaneKeepingEnv(gymnasium.Env):
         return self._observation_of(step), {}
 
     def step(self, action) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
-        if self._action == "discrete":
-            action = int(action)
-        step = self._env.step(action)
+        step = self._env.step(self._checked(action))
         outcome = self._env.task.episode.outcome
         info: dict[str, Any] = {f"cost_{name}": float(step.observation[f"cost_{name}"])
                                 for name in self.constraints}
@@ -80,6 +78,24 @@ class LaneKeepingEnv(gymnasium.Env):
         terminated = step.last() and outcome.termination is not None
         truncated = step.last() and not terminated
         return (self._observation_of(step), float(step.reward), terminated, truncated, info)
+
+    def _checked(self, action) -> int | np.ndarray:
+        """``action`` as the task takes it.
+
+        Raises:
+            ValueError: for a discrete action that is not a whole number in the action space
+                (``1.7`` is not action 1), or a continuous one that is not two finite numbers.
+        """
+        if self._action == "discrete":
+            if not self.action_space.contains(action):
+                raise ValueError(f"action: expected a whole number from 0 to "
+                                 f"{self.action_space.n - 1}, got {action!r}")
+            return int(action)
+        value = np.asarray(action, dtype=np.float32)
+        if value.shape != self.action_space.shape or not np.isfinite(value).all():
+            raise ValueError(f"action: expected {self.action_space.shape[0]} finite numbers, "
+                             f"got {action!r}")
+        return value
 
     def render(self) -> np.ndarray | None:
         if self.render_mode != "rgb_array":

@@ -18,6 +18,7 @@ from omegaconf import DictConfig, OmegaConf
 import crllk  # noqa: F401  (chooses the headless GL backend before torchrl imports mujoco)
 from crllk.cli import exit_status
 from crllk.errors import ConfigError
+from crllk.network import keep_ray_launcher_local
 from crllk.training.compose import (
     compose_config,
     launcher_problems,
@@ -82,4 +83,5 @@ def check_overrides(argv: list[str]) -> None:
 if __name__ == "__main__":
     sys.argv = [sys.argv[0], *task_paths_as_task_file(sys.argv[1:])]
     check_overrides(sys.argv[1:])
+    keep_ray_launcher_local(sys.argv[1:])
     main()

@@ -15,10 +15,10 @@ from pathlib import Path
 
 import psutil
 
+from crllk.network import RAY_LOCAL_ONLY
+
 LOOPBACK = {"127.0.0.1", "::ffff:127.0.0.1", "::1"}
-RAY_LOCAL_ONLY = {"RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER": "0"}
-"""Without it Ray on Linux turns 127.0.0.1 into the machine's address and listens on all
-interfaces."""
+"""The addresses of this machine's loopback interface, as ``psutil`` reports them."""
 HEAD_START_S = 180
 """The longest a head may take to start on a loaded machine (s)."""
 HEAD_STOP_S = 60

@@ -176,6 +176,7 @@ TASK_CASES = [
     ("negative_delay", "motor:\n  delay: -0.1\n", "motor.delay", ["non-negative"]),
     ("section_not_a_mapping", "camera: 40\n", "camera", ["expected a mapping"]),
     ("yaml_syntax", "horizon: [512\n", "line", ["not valid YAML"]),
+    ("name_climbs_out", "name: ../../x\n", "name", ["not a task name", "'../../x'"]),
 ]
 
 
@@ -213,6 +214,17 @@ def test_unknown_task_name():
     assert "unknown task" in message and "small_loop" in message
     with pytest.raises(MapError, match="no such map or task"):
         load_map("no_such_task")
+
+
+@pytest.mark.parametrize("name", ["../../x", "a/b", ".hidden"])
+def test_a_task_name_never_leaves_the_tasks_folder(name):
+    """A name (from the command line or a shared run's ``config.yaml``) is never joined into
+    a path: it becomes a file and folder name, so only plain names are taken."""
+    with pytest.raises(ConfigError, match="not a task name") as info:
+        load_task_config(name)
+    assert str(info.value).startswith(f"{name}: task: ")
+    with pytest.raises(ConfigError, match="not a task name"):
+        load_map(name)
 
 
 def test_missing_file(tmp_path):

@@ -226,3 +226,19 @@ def test_map_warnings_are_one_line(tmp_path):
         env={**os.environ, "PYTHONWARNINGS": "default"})
     assert done.returncode == 0, done.stderr
     assert done.stderr.strip() == f"warning: {path}: colour: unknown map key, ignored"
+
+
+def test_a_ray_launcher_sweep_keeps_ray_on_loopback(monkeypatch):
+    """``-m hydra/launcher=ray_local``: the trainer sets the variable that keeps Ray on
+    127.0.0.1 before Ray is imported, and leaves a value the user set alone."""
+    from crllk.network import RAY_LOCAL_ONLY, keep_ray_launcher_local
+
+    (key, local), = RAY_LOCAL_ONLY.items()
+    monkeypatch.delenv(key, raising=False)
+    assert not keep_ray_launcher_local(["-m", "seed=0,1"])
+    assert key not in os.environ
+    assert keep_ray_launcher_local(["-m", "hydra/launcher=ray_local", "seed=0,1"])
+    assert os.environ[key] == local
+    monkeypatch.setenv(key, "1")
+    assert not keep_ray_launcher_local(["-m", "hydra/launcher=ray_local"])
+    assert os.environ[key] == "1"

@@ -66,3 +66,23 @@ def test_stable_baselines3_trains_through_the_adapter(monkeypatch, capsys):
     runpy.run_path(str(REPO / "examples" / "stable_baselines3_ppo.py"), run_name="__main__")
     printed = capsys.readouterr().out
     assert "'return'" in printed and "'cost_lane'" in printed and "'cost'" in printed
+
+
+@pytest.mark.parametrize("action", [1.7, 3, -1, "1", [1], np.float32(1.0)])
+def test_a_discrete_action_that_is_not_one_is_refused(action):
+    env = gymnasium.make("crllk/SmallLoop-State-v0")
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match="action: expected a whole number from 0 to 2"):
+        env.step(action)
+    env.step(np.int64(1))  # numpy's whole numbers are actions
+    env.close()
+
+
+@pytest.mark.parametrize("action", [[0.1], [np.nan, 0.0], [0.0, np.inf]])
+def test_a_continuous_action_must_be_two_finite_numbers(action):
+    env = gymnasium.make("crllk/SmallLoop-StateContinuous-v0")
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match="action: expected 2 finite numbers"):
+        env.step(action)
+    env.step(np.zeros(2))
+    env.close()

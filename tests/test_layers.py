@@ -14,7 +14,7 @@ PACKAGE = Path(crllk.__file__).parent
 
 LAYERS = (
     ("crllk.errors", "crllk.files", "crllk.paths", "crllk.protocol", "crllk.settings", "crllk.cli",
-     "crllk.images"),
+     "crllk.images", "crllk.network"),
     ("crllk.maps",),
     ("crllk.sim",),
     ("crllk.tasks",),

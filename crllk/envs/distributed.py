@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import atexit
 import functools
-import ipaddress
 import os
 import secrets
 import socket
@@ -40,14 +39,12 @@ from tensordict import TensorDict, TensorDictBase
 from torchrl.envs.utils import ExplorationType
 
 from crllk.envs.batched import BatchedLaneKeepingEnv, MirroredTeacherFlag
+from crllk.network import RAY_LOCAL_ONLY, is_loopback
 
 CPUS_PER_COLLECTOR = 1
 """Ray CPUs each remote collector reserves: it steps its simulations and the policy on one."""
 CONNECT_TIMEOUT_S = 10.0
 """How long the head's port may take to answer before ``address`` is given up (s)."""
-LOCAL_ONLY = {"RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER": "0"}
-"""Without it Ray on Linux replaces 127.0.0.1 by the machine's address and listens on every
-interface."""
 SAMPLE_STREAM = 1
 """Second entropy word of the collectors' sample seeds (:func:`sample_seeds`)."""
 UNSYNCED_WARNING = "RayCollector iteration started before weight synchronization"
@@ -253,19 +250,9 @@ def keep_ray_local() -> None:
     ``RAY_USAGE_STATS_ENABLED=0`` (a local instance reports nothing)."""
     from ray._private import ray_constants
 
-    os.environ.update(LOCAL_ONLY)
+    os.environ.update(RAY_LOCAL_ONLY)
     os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
     ray_constants.ENABLE_RAY_CLUSTER = False
-
-
-def is_loopback(host: str) -> bool:
-    """Whether ``host`` names this machine's loopback interface."""
-    if host == "localhost":
-        return True
-    try:
-        return ipaddress.ip_address(host.strip("[]")).is_loopback
-    except ValueError:
-        return False
 
 
 def _batched(spec: Any, num_envs: int) -> Any:

@@ -18,7 +18,7 @@ from typing import Any
 from crllk.errors import ConfigError
 from crllk.files import read_yaml
 from crllk.maps import DuckietownMap, load_map
-from crllk.paths import task_file, task_names
+from crllk.paths import task_file, task_name_problem, task_names
 from crllk.sim.constants import PHYSICS_TIMESTEP
 from crllk.sim.motor import MotorConfig
 from crllk.tasks.constraints import AGGREGATES, BUILTIN, DEFAULT, SIGNALS, Constraint
@@ -129,6 +129,9 @@ def load_task_config(task: str | Path, overrides: Mapping[str, Any] | None = Non
 def parse_task(settings: Mapping[str, Any], *, name: str, dmap: DuckietownMap,
                source: str | Path) -> TaskConfig:
     """Check task settings (all sections but ``map``) and build the :class:`TaskConfig`."""
+    problem = task_name_problem(name)
+    if problem:
+        raise ConfigError(source, "name", problem)
     kwargs: dict[str, Any] = {}
     for key, value in settings.items():
         if key == "map":
