@@ -111,3 +111,49 @@ def test_the_annealed_small_loop_runs_are_quoted_as_they_ended():
     assert (f"seed 0 at J_clane {seeds[0]['J_clane']:.3f} dm and J_coll {seeds[0]['J_coll']:.2f}"
             f" (validation), seed 1 at {seeds[1]['J_clane']:.3f} dm and "
             f"{seeds[1]['J_coll']:.2f}") in text
+
+
+TEACHER_VARIANTS = {"floor 0.3 (default)": "", "annealed to 0 by 400k frames": "-teacher0",
+                    "no teacher": "-noteacher"}
+
+
+@pytest.mark.parametrize("label", TEACHER_VARIANTS)
+def test_the_teacher_choice_table_is_the_validation_evaluations(label):
+    """The default was chosen on the validation seed: each cell is the runs' ``eval.json`` and
+    ``eval-mode.json``, both on that seed."""
+    from crllk.protocol import VALIDATION_SEED
+
+    cells = []
+    for task in ("obstacle_loop", "small_loop"):
+        for seed in (0, 1):
+            variant = TEACHER_VARIANTS[label]
+            run = REPO / f"results/runs/pixels/{task}/CRLLK-D{variant}-a0.5-seed{seed}"
+            sampled, mode = (json.loads((run / f"{name}.json").read_text())
+                             for name in ("eval", "eval-mode"))
+            assert sampled["evaluation"]["seed"] == mode["evaluation"]["seed"] == VALIDATION_SEED
+            assert mode["evaluation"]["deterministic"]
+            assert not sampled["evaluation"]["deterministic"]
+            cells.append("; ".join(f"{d['summary']['J_clane']:.3f} / {d['summary']['J_coll']:.2f}"
+                                   for d in (sampled, mode)))
+    assert f"| {label} | " + " | ".join(cells) + " |" in FINDINGS.splitlines()
+
+
+def test_the_teacher_test_modes_quoted_are_the_table_s():
+    maps = json.loads((REPO / "results/pixels/teacher.json").read_text())["maps"]["obstacle_loop"]
+    floor, none = ([f"{v:.2f}" for v in maps[variant]["mode"]["J_coll"]["values"]]
+                   for variant in ("floor 0.3 (default)", "no teacher"))
+    text = " ".join(FINDINGS.split())
+    assert (f"floor {floor[0]} and {floor[1]}, no teacher {none[0]} and {none[1]})") in text
+
+
+def test_the_readme_quotes_what_the_teacher_s_floor_buys():
+    readme = " ".join((REPO / "README.md").read_text().split())
+
+    def worst_mode(variant: str) -> float:
+        return max(json.loads((REPO / f"results/runs/pixels/{task}/CRLLK-D{variant}-a0.5-seed{s}"
+                               / "eval-mode.json").read_text())["summary"]["J_coll"]
+                   for task in ("obstacle_loop", "small_loop") for s in (0, 1))
+
+    assert (f"collides up to {round(100 * worst_mode('-noteacher'))} times in 100 validation "
+            "episodes where the floor's collides at most once") in readme
+    assert round(100 * worst_mode("")) == 1
