@@ -5,7 +5,9 @@
 Runs the pilot (:class:`Pilot`, from :mod:`crllk.deployment.pilot`) on every frame of a folder
 of images (JPEG files reach it as the camera's messages do) or of a video, writes one row per
 frame to ``--out`` (frame, vel_left, vel_right, latency in ms: preparing the frame and running
-the policy) and prints the latency's median and 95th percentile on this machine.
+the policy) and prints the latency's median and 95th percentile on this machine, and how many
+frames gave a stop instead (a policy output that is not finite). A frame that cannot be read
+(no image, too large an image) ends it with one line naming the file.
 
 In Python: ``Pilot.from_onnx("policy.onnx").step(jpeg_bytes)`` gives a :class:`WheelCommand`.
 """
@@ -51,14 +53,22 @@ def main(argv: Sequence[str] | None = None) -> int:
     rows, latencies = [], []
     for name, frame in read_frames(args.frames):
         start = time.perf_counter()
-        command = pilot.step(frame)
+        command = pilot.step(frame, frame_source(args.frames, name))
         latencies.append(1000.0 * (time.perf_counter() - start))
         rows.append((name, command, latencies[-1]))
     atomic_write_text(args.out, commands_csv(rows))
     median, p95 = np.percentile(latencies, [50, 95])
     print(f"{len(rows)} frames -> {args.out}; latency per frame (prepare + policy): median "
           f"{median:.2f} ms, 95th percentile {p95:.2f} ms, {args.threads} thread(s)")
+    if pilot.faults.total:
+        kinds = ", ".join(f"{kind} {count}" for kind, count in pilot.faults.counts.items())
+        print(f"{pilot.faults.total} of {len(rows)} frames gave a stop ({kinds})")
     return 0
+
+
+def frame_source(frames: Path, name: str) -> str:
+    """What a frame's errors name: the image file, or ``<video>#<index>``."""
+    return str(frames / name if frames.is_dir() else frames.with_name(name))
 
 
 def print_parity(pilot: Pilot, tasks: Sequence[str], frames: int) -> int:

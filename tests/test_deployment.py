@@ -213,14 +213,14 @@ def test_bad_input_is_one_line(tmp_path, capsys, command, argv, words):
                                         ("supersample", "0"), ("supersample", "eight")])
 def test_a_policy_with_bad_metadata_is_one_line(pixel_policy, key, value):
     """An exported file whose ``crllk.history`` or ``crllk.supersample`` was edited by hand: a
-    ConfigError naming the file and the metadata, not a traceback."""
+    ConfigError naming the file and the metadata field, not a traceback."""
     from crllk.errors import ConfigError
 
     pilot = Pilot.from_onnx(pixel_policy)
     metadata = {**pilot.metadata, key: value}
     with pytest.raises(ConfigError) as error:
         Pilot(pilot.session, metadata, str(pixel_policy))
-    assert str(error.value).startswith(f"{pixel_policy}: metadata: not a crllk policy")
+    assert str(error.value).startswith(f"{pixel_policy}: crllk.{key}: ")
     assert "\n" not in str(error.value)
 
 

@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from crllk.errors import ConfigError
+from crllk.images import check_frame_bytes, check_frame_pixels
 
 IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png")
 VIDEO_SUFFIXES = (".mp4", ".avi", ".mkv", ".mov", ".webm")
@@ -18,7 +19,8 @@ def read_frames(path: str | Path) -> Iterator[tuple[str, bytes | np.ndarray]]:
     pilot as the camera's messages do) or from a video (RGB arrays).
 
     Raises:
-        ConfigError: for a missing path, a folder without images or an unreadable video.
+        ConfigError: for a missing path, a folder without images, an unreadable video, or a
+            file or video frame over the bounds of :mod:`crllk.images` (checked before reading).
     """
     path = Path(path)
     if path.is_dir():
@@ -26,6 +28,7 @@ def read_frames(path: str | Path) -> Iterator[tuple[str, bytes | np.ndarray]]:
         if not files:
             raise ConfigError(path, "frames", f"no images ({', '.join(IMAGE_SUFFIXES)})")
         for file in files:
+            check_frame_bytes(file.stat().st_size, str(file))
             yield file.name, file.read_bytes()
         return
     if not path.is_file():
@@ -39,6 +42,8 @@ def read_frames(path: str | Path) -> Iterator[tuple[str, bytes | np.ndarray]]:
     if not video.isOpened():
         raise ConfigError(path, "frames", "cannot read the video")
     try:
+        check_frame_pixels(int(video.get(cv2.CAP_PROP_FRAME_WIDTH)),
+                           int(video.get(cv2.CAP_PROP_FRAME_HEIGHT)), str(path))
         index = 0
         while True:
             ok, frame = video.read()

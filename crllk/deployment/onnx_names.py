@@ -5,5 +5,9 @@ INPUT, OUTPUT = "observation", "duty"
 """The graph's input and output."""
 METADATA_PREFIX = "crllk."
 """Prefix of the metadata keys (``crllk.observation``, ``crllk.supersample``, ...)."""
+OBSERVATIONS = ("pixels", "state")
+"""What a policy may read (``crllk.observation``)."""
+EXPORTABLE_ACTIONS = ("discrete", "continuous", "duckietown")
+"""The action spaces whose policies export (``crllk.action``)."""
 
-__all__ = ["INPUT", "METADATA_PREFIX", "OUTPUT"]
+__all__ = ["EXPORTABLE_ACTIONS", "INPUT", "METADATA_PREFIX", "OBSERVATIONS", "OUTPUT"]

@@ -7,6 +7,13 @@ publishes them or an RGB array of any size, prepares it exactly as in training
 the policy chose, the values of the robot's ``WheelsCmdStamped`` message. A state policy's
 pilot takes the state features instead.
 
+It fails safe: state features or a policy output that are not finite give :data:`STOP` (both
+wheels 0), counted in :attr:`Pilot.faults` and logged as a warning the first time and every
+:data:`WARN_EVERY` times after, so the pilot never returns a command that is not finite. A frame
+that cannot be read (no image, too large an image, the wrong kind of input) raises a one-line
+:class:`~crllk.errors.ConfigError`; the ROS 2 node stops the wheels on it and goes on. The
+policy file's metadata is checked with bounds as it loads (:mod:`.metadata`).
+
 A policy trained with a frame history (``obs.history``) reads its last images together; the
 pilot keeps them (:class:`~crllk.tasks.frames.FrameHistory`), one per ``step``, so it must be
 stepped at the control rate it was trained at (30 Hz, the camera's rate), and :meth:`Pilot.reset`
@@ -15,18 +22,28 @@ starts a new drive.
 
 from __future__ import annotations
 
-import json
+import logging
+from collections import Counter
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import onnxruntime
 
+from crllk.deployment.metadata import check_graph, read_metadata
 from crllk.deployment.onnx_names import INPUT, METADATA_PREFIX
 from crllk.errors import ConfigError
 from crllk.tasks.frames import FrameHistory, policy_image
 
 SOURCE = "pilot"
+WARN_EVERY = 30
+"""A kind of stop is logged the first time and then every this many times, with its count
+(once a second while it lasts at the 30 Hz control rate)."""
+NON_FINITE_INPUT = "state features not finite"
+NON_FINITE_OUTPUT = "policy output not finite"
+
+_LOG = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -37,31 +54,66 @@ class WheelCommand:
     vel_right: float
 
 
+STOP = WheelCommand(0.0, 0.0)
+"""Both wheels stopped: what the pilot and the node send when they cannot drive."""
+
+
+class Faults:
+    """How many times each kind of fault stopped the wheels (:attr:`counts`), logged as a
+    warning ``<source>: <kind>: wheels stopped (<n> so far)[: <detail>]`` the first time and
+    every ``every`` times after, not once per frame."""
+
+    def __init__(self, source: str, warn: Callable[[str], object] | None = None,
+                 every: int = WARN_EVERY):
+        self.source = source
+        self.warn = warn if warn is not None else _LOG.warning
+        """Where the warnings go (a ROS node sets its own logger)."""
+        self.every = every
+        self.counts: Counter[str] = Counter()
+
+    @property
+    def total(self) -> int:
+        """Stops of every kind."""
+        return sum(self.counts.values())
+
+    def record(self, kind: str, detail: str = "") -> None:
+        """Counts one stop of ``kind`` and logs it if it is the first or an ``every``-th."""
+        self.counts[kind] += 1
+        count = self.counts[kind]
+        if count == 1 or count % self.every == 0:
+            self.warn(f"{self.source}: {kind}: wheels stopped ({count} so far)"
+                      + (f": {detail}" if detail else ""))
+
+
 class Pilot:
     """Turns frames into wheel commands with one exported policy (see the module docstring)."""
 
     def __init__(self, session: onnxruntime.InferenceSession, metadata: dict[str, str],
-                 source: str = SOURCE):
+                 source: str = SOURCE, faults: Faults | None = None):
+        """The pilot of the policy ``session`` runs, its ``metadata`` (keys without
+        ``crllk.``) checked (:mod:`.metadata`); ``source`` names it in messages.
+
+        Raises:
+            ConfigError: ``<source>: crllk.<field>: <problem>`` for metadata out of its bounds
+                or unlike the graph.
+        """
+        checked = read_metadata(metadata, source)
+        check_graph(session.get_inputs(), session.get_outputs(), checked, source)
         self.session = session
         self.source = source
-        try:
-            self.observation = metadata["observation"]
-            self.action = metadata["action"]
-            self.observation_shape = tuple(json.loads(metadata["observation_shape"]))
-            count, stride = json.loads(metadata.get("history", "[1, 1]"))
-            self.history = (FrameHistory(1, (*self.observation_shape[:2], 3), count, stride)
-                            if self.observation == "pixels" else None)
-            """The images the policy remembers (pixel policies)."""
-            supersample = metadata.get("supersample")
-            self.supersample = None if supersample is None else int(supersample)
-            """How much larger training rendered its images before averaging them down (None
-            for exports that do not say)."""
-            if self.supersample is not None and self.supersample < 1:
-                raise ValueError(supersample)
-        except (KeyError, ValueError, TypeError):
-            raise ConfigError(source, "metadata", "not a crllk policy (export it with "
-                              "python -m crllk.export)") from None
+        self.observation = checked.observation
+        self.action = checked.action
+        self.observation_shape = checked.observation_shape
+        count, stride = checked.history
+        self.history = (FrameHistory(1, (*self.observation_shape[:2], 3), count, stride)
+                        if self.observation == "pixels" else None)
+        """The images the policy remembers (pixel policies)."""
+        self.supersample = checked.supersample
+        """How much larger training rendered its images before averaging them down (None for
+        exports that do not say)."""
         self.metadata = metadata
+        self.faults = faults if faults is not None else Faults(source)
+        """The stops for features or outputs that are not finite (and the node's own)."""
         self._fresh = True
 
     def reset(self) -> None:
@@ -92,14 +144,32 @@ class Pilot:
                     if key.startswith(METADATA_PREFIX)}
         return cls(session, metadata, str(path))
 
-    def observation_of(self, frame: bytes | np.ndarray) -> np.ndarray:
-        """What the policy reads of ``frame``: the 30×40 image, or the state features."""
+    def observation_of(self, frame: bytes | np.ndarray, source: str | None = None) -> np.ndarray:
+        """What the policy reads of ``frame``: the 30×40 image, or the state features.
+
+        Raises:
+            ConfigError: ``<source>: frame: <problem>`` (``source`` defaults to the policy's
+                file) for a frame that is no image, too large an image or the wrong kind of
+                input; one short line, never the frame's bytes.
+        """
+        source = self.source if source is None else source
         if self.observation == "pixels":
-            return policy_image(frame, self.observation_shape[:2], self.source)
-        features = np.asarray(frame, dtype=np.float32)
+            if not isinstance(frame, bytes | bytearray | memoryview | np.ndarray):
+                raise ConfigError(source, "frame", "expected an image (JPEG or PNG bytes, or RGB "
+                                  f"uint8 of shape (height, width, 3)), got {_kind(frame)}")
+            return policy_image(frame, self.observation_shape[:2], source)
+        expected = f"expected {self.observation_shape[0]} state features"
+        if isinstance(frame, bytes | bytearray | memoryview):
+            raise ConfigError(source, "frame", f"{expected}, got {_kind(frame)} (an image?)")
+        if isinstance(frame, str):
+            raise ConfigError(source, "frame", f"{expected}, got {_kind(frame)}")
+        try:
+            with np.errstate(over="ignore"):  # too large for float32: inf, a stop in step
+                features = np.asarray(frame, dtype=np.float32)
+        except (TypeError, ValueError):
+            raise ConfigError(source, "frame", f"{expected}, got {_kind(frame)}") from None
         if features.shape != self.observation_shape:
-            raise ConfigError(self.source, "frame", f"expected {self.observation_shape[0]} state "
-                              f"features, got an array of shape {features.shape}")
+            raise ConfigError(source, "frame", f"{expected}, got {_kind(frame)}")
         return features
 
     def duty(self, observation: np.ndarray) -> np.ndarray:
@@ -118,8 +188,32 @@ class Pilot:
             self.history.push(observation[None])
         return self.history.stacked()[0]
 
-    def step(self, frame: bytes | np.ndarray) -> WheelCommand:
-        """The wheel command for the next frame of a drive."""
-        observation = self.remember(self.observation_of(frame))
-        left, right = np.clip(self.duty(observation), -1.0, 1.0).tolist()
+    def step(self, frame: bytes | np.ndarray, source: str | None = None) -> WheelCommand:
+        """The wheel command for the next frame of a drive; :data:`STOP` (counted in
+        :attr:`faults`) for state features or a policy output that are not finite.
+
+        Raises:
+            ConfigError: for a frame that cannot be read (:meth:`observation_of`).
+        """
+        observation = self.observation_of(frame, source)
+        if observation.dtype.kind == "f" and not np.isfinite(observation).all():
+            self.faults.record(NON_FINITE_INPUT)
+            return STOP
+        duty = np.asarray(self.duty(self.remember(observation)))
+        if duty.shape != (2,) or not np.isfinite(duty).all():
+            self.faults.record(NON_FINITE_OUTPUT)
+            return STOP
+        left, right = np.clip(duty, -1.0, 1.0).tolist()
         return WheelCommand(vel_left=left, vel_right=right)
+
+
+def _kind(frame: object) -> str:
+    """What ``frame`` is, in a few words (never its contents)."""
+    if isinstance(frame, np.ndarray):
+        return f"{frame.dtype} of shape {frame.shape}"
+    if isinstance(frame, bytes | bytearray | memoryview):
+        return f"{len(frame)} bytes"
+    try:
+        return f"a {type(frame).__name__} of {len(frame)}"  # type: ignore[arg-type]
+    except TypeError:
+        return f"a {type(frame).__name__}"

@@ -14,10 +14,9 @@ import torch
 from torch import nn
 from torchrl.modules import ProbabilisticActor
 
+from crllk.deployment.onnx_names import EXPORTABLE_ACTIONS
 from crllk.sim.constants import WHEEL_DISTANCE, WHEEL_RADIUS
 from crllk.tasks import actions
-
-EXPORTABLE_ACTIONS = ("discrete", "continuous", "duckietown")
 
 
 class DeployedPolicy(nn.Module):

@@ -21,7 +21,7 @@ import numpy as np
 from PIL import Image
 
 from crllk.errors import ConfigError
-from crllk.images import box_average
+from crllk.images import box_average, decode_image
 
 POLICY_IMAGE = (30, 40)
 """Height and width (pixels) of the policy's camera image."""
@@ -31,14 +31,11 @@ def decode(frame: bytes | np.ndarray, source: str = "frame") -> np.ndarray:
     """An RGB uint8 H×W×3 array from JPEG (or PNG) bytes or an array (H×W×3 or H×W×4).
 
     Raises:
-        ConfigError: for bytes that are no image, or an array of another shape or type.
+        ConfigError: for bytes that are no image or too large an image
+            (:func:`crllk.images.decode_image`), or an array of another shape or type.
     """
     if isinstance(frame, bytes | bytearray | memoryview):
-        try:
-            with Image.open(io.BytesIO(bytes(frame))) as image:
-                return np.asarray(image.convert("RGB"))
-        except (OSError, ValueError) as err:
-            raise ConfigError(source, "frame", f"not an image: {err}") from None
+        return decode_image(bytes(frame), source)
     array = np.asarray(frame)
     if array.ndim != 3 or array.shape[2] not in (3, 4) or array.dtype != np.uint8:
         raise ConfigError(source, "frame", "expected RGB uint8 of shape (height, width, 3), got "
