@@ -19,6 +19,10 @@ to ``<run>/eval.json``: J_R (m), J_clane (dm), J_coll, episode length, the actio
 termination reasons and one row per episode. Several runs also print (and with ``out=`` write)
 mean ± std across runs, the paper's way of reporting seeds. ``record=true`` also records
 ``record_episodes`` episodes of each run with rerun to ``<run>/recordings/eval.rrd``.
+
+Every file is checked writable before the first episode. Each result is written under its own
+lock (:mod:`crllk.training.run_dir`): a second evaluation into the same file of a run waits
+for the first (saying so) instead of racing it; a run being trained can be evaluated.
 """
 
 from __future__ import annotations
@@ -30,9 +34,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from crllk.cli import run
+from crllk.cli import one_line, run
 from crllk.errors import ConfigError
-from crllk.files import atomic_write_text, write_problem
+from crllk.files import WriteError, atomic_write_text, write_problem
 from crllk.protocol import VALIDATION_SEED
 from crllk.settings import (
     at_least_one,
@@ -86,7 +90,9 @@ class EvaluateConfig:
     viewer: str = setting("none", check=one_of("none", "spawn", "serve"))
     overrides: dict[str, Any] = field(default_factory=dict)
     """Task settings changed for this evaluation, e.g. ``overrides.randomize=default`` or
-    ``overrides.camera.robot_frames=true``; the result goes to ``<run>/<name>.json``."""
+    ``overrides.camera.robot_frames=true``, checked before any episode: of each run's task
+    (named or a task file), its recording's, and the follower's and teacher's task; a run's
+    result goes to ``<run>/<name>.json``."""
     name: str = setting("eval", check=file_stem)
     """The result's file name in each run directory, without ``.json``."""
     thresholds: dict[str, float] = field(default_factory=algo_thresholds)
@@ -102,6 +108,8 @@ class EvaluateConfig:
         for run_dir in self.run_dirs():
             if not run_dir.is_dir():
                 yield "run", f"no such run directory: {run_dir}"
+            elif problem := write_problem(run_dir / f"{self.name}.json"):
+                yield "run", f"cannot write the result: {problem}"
             elif self.record and (problem := write_problem(run_dir / EVAL_RECORDING)):
                 yield "record", f"cannot write the recording: {problem}"
         problem = write_problem(self.out) if self.out else None
@@ -127,9 +135,19 @@ def main(argv: Sequence[str] | None = None) -> int:
         import torch
 
         from crllk.evaluation.report import aggregate, format_aggregate, format_summary
-        from crllk.evaluation.runs import evaluate_follower, evaluate_run, record_run
+        from crllk.evaluation.runs import (
+            check_task_overrides,
+            evaluate_follower,
+            evaluate_run,
+            evaluation_config,
+            record_run,
+        )
 
         torch.set_num_threads(config.threads)
+        for run_dir in config.run_dirs():  # every run's overrides checked before any work
+            evaluation_config(run_dir, config.overrides)
+        if config.overrides and (config.follower or config.teacher):
+            check_task_overrides(config.task, config.overrides, config.overrides, SOURCE)
         documents = []
         for run_dir in config.run_dirs():
             documents.append(evaluate_run(run_dir, episodes=config.episodes,
@@ -139,7 +157,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             print(format_summary(documents[-1]), flush=True)
             if config.record:
                 record_run(run_dir, episodes=config.record_episodes, seed=config.seed,
-                           deterministic=config.deterministic, viewer=config.viewer)
+                           deterministic=config.deterministic, viewer=config.viewer,
+                           overrides=config.overrides)
         output: dict[str, Any] = {}
         if len(documents) > 1:
             output["aggregate"] = aggregate(documents)
@@ -150,14 +169,13 @@ def main(argv: Sequence[str] | None = None) -> int:
                     config.task, episodes=config.episodes, num_envs=config.num_envs,
                     seed=VALIDATION_SEED if config.seed is None else config.seed,
                     thresholds=config.thresholds, avoid_obstacles=name == "teacher",
-                    action=config.action, margin=config.margin)
+                    action=config.action, margin=config.margin, overrides=config.overrides)
                 print(format_summary(output[name]), flush=True)
         if config.out:
             output["runs"] = documents
-            Path(config.out).parent.mkdir(parents=True, exist_ok=True)
             atomic_write_text(config.out, json.dumps(output, indent=1) + "\n")
-    except ConfigError as err:
-        print(f"error: {err}", file=sys.stderr)
+    except (ConfigError, WriteError) as err:
+        print(f"error: {one_line(err)}", file=sys.stderr)
         return 2
     return 0
 

@@ -1,5 +1,7 @@
 """``python -m crllk.record``: record episodes of the scripted lane follower with rerun
 (a trained run's episodes: ``python -m crllk.evaluate run=DIR record=true``).
+The file is written beside ``--out`` and renamed over it at the end, under its lock
+(:func:`crllk.files.output_lock`).
 
     python -m crllk.record --task obstacle_loop --episodes 1 --out rec.rrd [--viewer spawn]
 """
@@ -15,7 +17,7 @@ from pathlib import Path
 
 from crllk.cli import Parser, fail, positive_int, run
 from crllk.errors import ConfigError
-from crllk.files import write_problem
+from crllk.files import output_lock, write_problem
 from crllk.recording.recorder import VIEWERS, RecordingReport, record_episodes
 from crllk.tasks.follower import FollowerPolicy
 
@@ -73,7 +75,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     if problem:
         fail(f"{args.out}: --out: {problem}")
     try:
-        with _follower_env(args) as env:
+        with output_lock(args.out), _follower_env(args) as env:
             start = time.perf_counter()
             report = record_episodes(env, FollowerPolicy(env), args.episodes, args.out,
                                      viewer=args.viewer)

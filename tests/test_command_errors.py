@@ -7,6 +7,7 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -14,7 +15,7 @@ from omegaconf import OmegaConf
 
 from crllk import evaluate, experiments, pictures, record
 from crllk.cli import DEBUG_VARIABLE, exit_status
-from crllk.files import atomic_write_text
+from crllk.files import STALE_TEMP_AGE_S, atomic_write_text
 from crllk.train import resolve_config
 from crllk.training.compose import compose_config
 from crllk.training.config import validate
@@ -69,14 +70,26 @@ def test_trainer_refuses_a_run_directory_it_cannot_use(tmp_path, capsys, a_file)
         assert f"run: run_dir: {run_dir}" in err and words in err
 
 
+def _dead_pid() -> int:
+    """The id of a process that has ended."""
+    ended = subprocess.Popen([sys.executable, "-c", "pass"])
+    ended.wait()
+    return ended.pid
+
+
 def test_resume_removes_what_a_killed_write_left(tmp_path):
+    """Temporary files whose writer is gone go; one whose writer runs (an evaluation writing
+    into the run meanwhile) stays."""
     run_dir = tmp_path / "run"
     assert _train_status([f"run_dir={run_dir}"]) == 0
-    leftovers = [run_dir / ".eval.csv.x1.tmp", run_dir / ".config.yaml.x2.tmp"]
-    for leftover in leftovers:
+    dead = _dead_pid()
+    leftovers = [run_dir / f".eval.csv.{dead}-x1.tmp", run_dir / f".config.yaml.{dead}-x2.tmp",
+                 run_dir / "checkpoints" / f".last.pt.{dead}-x3.tmp"]
+    live = run_dir / f".eval.json.{os.getppid()}-x4.tmp"
+    for leftover in (*leftovers, live):
         leftover.write_text("half")
     assert _train_status([f"run_dir={run_dir}", "resume=true", "total_frames=16"]) == 0
-    assert not any(leftover.exists() for leftover in leftovers)
+    assert not any(leftover.exists() for leftover in leftovers) and live.exists()
 
 
 # ----- crllk.evaluate ------------------------------------------------------------------------
@@ -206,14 +219,20 @@ def test_an_unexpected_error_is_one_line_and_its_traceback_is_a_switch(capsys, m
 
 
 def test_an_atomic_write_removes_the_leftovers_of_killed_writes(tmp_path):
+    """Leftovers of the same file whose writer is gone (or that nobody touched for a day) go;
+    another file's, and those of writers still running, stay."""
     target = tmp_path / "eval.json"
-    leftovers = [tmp_path / ".eval.json.abc123.tmp", tmp_path / ".eval.json.x.tmp"]
-    other = tmp_path / ".metrics.csv.abc.tmp"
-    for path in (*leftovers, other):
+    dead = _dead_pid()
+    leftovers = [tmp_path / f".eval.json.{dead}-abc123.tmp", tmp_path / ".eval.json.x.tmp"]
+    kept = [tmp_path / f".metrics.csv.{dead}-abc.tmp", tmp_path / ".eval.json.y.tmp",
+            tmp_path / f".eval.json.{os.getppid()}-live.tmp"]
+    for path in (*leftovers, *kept):
         path.write_text("half")
+    day_ago = time.time() - STALE_TEMP_AGE_S - 60
+    os.utime(leftovers[1], (day_ago, day_ago))
     atomic_write_text(target, "{}\n")
     assert target.read_text() == "{}\n"
-    assert not any(p.exists() for p in leftovers) and other.exists()
+    assert not any(p.exists() for p in leftovers) and all(p.exists() for p in kept)
 
 
 def test_map_warnings_are_one_line(tmp_path):

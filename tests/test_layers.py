@@ -14,7 +14,7 @@ PACKAGE = Path(crllk.__file__).parent
 
 LAYERS = (
     ("crllk.errors", "crllk.files", "crllk.paths", "crllk.protocol", "crllk.settings", "crllk.cli",
-     "crllk.images", "crllk.network"),
+     "crllk.images", "crllk.network", "crllk.yaml_files"),
     ("crllk.maps",),
     ("crllk.sim",),
     ("crllk.tasks",),
@@ -25,7 +25,8 @@ LAYERS = (
     ("crllk.evaluation",),
     ("crllk.analysis", "crllk.deployment"),
     ("crllk.train", "crllk.evaluate", "crllk.record", "crllk.experiments", "crllk.pictures",
-     "crllk.screenshots", "crllk.demo", "crllk.bench", "crllk.export", "crllk.deploy"),
+     "crllk.screenshots", "crllk.demo", "crllk.bench", "crllk.export", "crllk.deploy",
+     "crllk.convert"),
 )
 """Bottom to top, in the order data flows: maps, MuJoCo, dm-control tasks, TorchRL
 environments, learning, recording, the trainer, evaluation of runs, analysis, commands."""

@@ -3,6 +3,7 @@ failures that warn (training) or stop with a clear error (evaluation) instead of
 
 from __future__ import annotations
 
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -67,8 +68,7 @@ def test_evaluation_records_episodes_or_fails_clearly(tmp_path):
     path = run / "recordings" / "eval.rrd"
     assert f"recording: {path} (2 episodes, 24 steps)" in result.stdout
     assert sum(batch.num_rows for batch in read_recording(path)[ROBOT]) == 24
-    path.unlink()
-    path.parent.rmdir()
+    shutil.rmtree(path.parent)  # the recording and its lock file
     path.parent.write_text("not a folder")
     result = run_module("crllk.evaluate", f"run={run}", "episodes=1", "record=true")
     assert result.returncode == 2

@@ -19,6 +19,7 @@ from tiny_runs import (
     TINY,
     assert_same_runs,
     compose_config,
+    held_by_another_process,
     read_rows,
     run_in_process,
 )
@@ -239,24 +240,27 @@ def test_broken_task_file_names_file_and_field(tmp_path, key):
     assert not run_dir.exists()
 
 
+def test_task_settings_given_with_a_task_file_are_refused(tmp_path):
+    """``task=<file>.yaml task.horizon=12``: the file holds the task's settings, so the change
+    would be dropped; it is refused in one line instead."""
+    result = run_command(f"run_dir={tmp_path / 'never'}", "total_frames=16",
+                         f"task={REPO / 'tasks' / 'small_loop.yaml'}", "task.horizon=12")
+    assert result.returncode == 2
+    assert result.stderr.strip() == ("error: override: task.horizon: a task file's settings are "
+                                     "set in the file; task.* changes apply to named tasks (edit "
+                                     "a copy of the file)")
+    assert not (tmp_path / "never").exists()
+
+
 def test_a_run_being_trained_cannot_be_trained_twice(tmp_path):
     """A second process on a locked run directory stops with a clear message, writes nothing,
     and the lock goes with the process that held it."""
     run_dir = tmp_path / "run"
-    holder = subprocess.Popen(
-        [sys.executable, "-c", "import sys; from pathlib import Path; "
-         "from crllk.training.run_dir import lock_run_dir; held = lock_run_dir(Path(sys.argv[1])); "
-         "print('locked', flush=True); sys.stdin.read()", str(run_dir)],
-        cwd=REPO, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
-    try:
-        assert holder.stdout.readline().strip() == "locked"
+    with held_by_another_process("lock_run_dir(Path(sys.argv[1]))", run_dir):
         result = run_command(*TINY, f"run_dir={run_dir}", "resume=true", "total_frames=16")
         assert result.returncode == 2
         assert "is being trained by another process" in result.stderr
         assert not (run_dir / "metrics.csv").exists()
-    finally:
-        holder.kill()
-        holder.wait()
     result = run_command(*TINY, f"run_dir={run_dir}", "resume=true", "total_frames=16")
     assert result.returncode == 0, result.stderr
 

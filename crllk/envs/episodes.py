@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+import torch
 from tensordict import TensorDictBase
 
 from crllk.tasks.constraints import Constraint
@@ -106,10 +107,15 @@ class EpisodeAccumulator:
         return finished
 
     def state_dict(self) -> dict[str, Any]:
-        return {"distance": self.distance.copy(), "length": self.length.copy(),
-                "costs": {name: sums.copy() for name, sums in self.cost_sums.items()}}
+        """The running sums as tensors (``distance``, ``length``, ``costs`` by constraint
+        name), which checkpoints load without running code."""
+        return {"distance": torch.from_numpy(self.distance.copy()),
+                "length": torch.from_numpy(self.length.copy()),
+                "costs": {name: torch.from_numpy(sums.copy())
+                          for name, sums in self.cost_sums.items()}}
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
+        """Continues from a :meth:`state_dict` (tensors, or arrays of older snapshots)."""
         arrays = {"distance": self.distance, "length": self.length,
                   **{f"costs.{name}": sums for name, sums in self.cost_sums.items()}}
         saved = {"distance": state["distance"], "length": state["length"],

@@ -5,12 +5,12 @@ from __future__ import annotations
 from pathlib import Path
 
 from crllk.errors import MapError, MapWarning
-from crllk.files import read_yaml
 from crllk.maps.format import MapSpec, Tile, parse_map
 from crllk.maps.lanes import Lane
 from crllk.maps.objects import MapObject
 from crllk.maps.road import DuckietownMap, LanePose
 from crllk.paths import task_file, task_names
+from crllk.yaml_files import read_yaml
 
 __all__ = ["DuckietownMap", "Lane", "LanePose", "MapError", "MapObject", "MapSpec", "MapWarning",
            "Tile", "load_map"]

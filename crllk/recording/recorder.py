@@ -40,6 +40,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable, Sequence
+from contextlib import nullcontext
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -56,6 +57,7 @@ from torchrl.envs.utils import ExplorationType, set_exploration_type
 from crllk.envs.batched import TERMINATIONS
 from crllk.envs.episodes import EpisodeAccumulator, EpisodeStats
 from crllk.errors import RecordingError
+from crllk.files import WriteError, atomic_output, write_problem
 from crllk.maps import DuckietownMap
 from crllk.maps.markings import (
     LANE_HEIGHT,
@@ -417,8 +419,10 @@ class _Recorder:
 
 # ----- sinks ------------------------------------------------------------------------------
 def check_writable(path: str | Path) -> Path:
-    """Create ``path``'s directory and an empty ``path``, so that a recording fails before
-    stepping, not halfway.
+    """Create ``path``'s directory and check that a file can be written in it, so that a
+    recording fails before stepping, not halfway. The file itself is left alone: it is written
+    beside it and renamed over it at the end (:func:`crllk.files.atomic_output`), so a link
+    planted at ``path`` is replaced, never written through.
 
     Raises:
         RecordingError: naming the path when the directory or the file cannot be created.
@@ -426,21 +430,23 @@ def check_writable(path: str | Path) -> Path:
     path = Path(path)
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        with path.open("wb"):
-            pass
     except OSError as err:
         raise RecordingError(path, err.strerror or str(err)) from None
+    problem = write_problem(path)
+    if problem:
+        raise RecordingError(path, problem)
     return path
 
 
-def _open_sinks(path: Path | None, viewer: str, problems: list[str]
+def _open_sinks(sink_path: Path | None, path: Path | None, viewer: str, problems: list[str]
                 ) -> tuple[list, str | None]:
-    """The sinks for ``path`` and ``viewer``; an unreachable viewer becomes a warning.
+    """The sinks for ``sink_path`` (written as the file ``path``) and ``viewer``; an
+    unreachable viewer becomes a warning.
 
     A viewer that could not be spawned is reported once per process: later recordings only
     reuse a viewer that answers by then (started by hand), and say nothing otherwise.
     """
-    sinks: list = [rr.FileSink(path)] if path is not None else []
+    sinks: list = [rr.FileSink(sink_path)] if sink_path is not None else []
     url = None
     try:
         if viewer == "spawn":
@@ -544,8 +550,23 @@ def record_episodes(env: BatchedLaneKeepingEnv, policy: Policy, episodes: int,
     """
     _check_arguments(episodes, path, viewer)
     file = check_writable(path) if path is not None else None
+    try:
+        with atomic_output(file) if file is not None else nullcontext() as written:
+            return _record(env, policy, episodes, file, written, deterministic=deterministic,
+                           viewer=viewer, iteration=iteration, multipliers=multipliers,
+                           recording_id=recording_id, application_id=application_id)
+    except WriteError as err:
+        raise RecordingError(file or "", err.strerror) from None
+
+
+def _record(env: BatchedLaneKeepingEnv, policy: Policy, episodes: int, file: Path | None,
+            written: Path | None, *, deterministic: bool, viewer: str, iteration: int | None,
+            multipliers: dict[str, float] | None, recording_id: str | None,
+            application_id: str) -> RecordingReport:
+    """:func:`record_episodes`, with rerun's file sink writing ``written`` (a temporary path,
+    renamed to ``file`` afterwards)."""
     problems: list[str] = []
-    sinks, url = _open_sinks(file, viewer, problems)
+    sinks, url = _open_sinks(written, file, viewer, problems)
     if not sinks:
         return RecordingReport(None, 0, 0, 0.0, warnings=tuple(problems))
     recorder = _Recorder(rr.RecordingStream(application_id, recording_id=recording_id),

@@ -114,9 +114,10 @@ def draw(distribution: Distribution, noise: ActionNoise) -> tuple[torch.Tensor, 
 
 POLICY_ROWS = 8
 """The policy's batch during collection is padded to a multiple of this many rows: CPU kernels
-choose their code path by batch size (a batch of 1 or 2 rounds differently from one of 8), and
-on full multiples of 8 a row's outputs do not depend on the others, so a simulation acts the
-same whether its process steps 1, 8 or 16 of them."""
+choose their code path by batch size (a batch of 1 or 2 rounds differently from one of 8). On
+an AMD EPYC a row's outputs then do not depend on the others, so a simulation acts the same
+whether its process steps 1, 8 or 16 of them; on an Intel Xeon they may still differ in the
+last bit."""
 
 
 def sample_actions(actor: ProbabilisticActor, tensordict: TensorDictBase,

@@ -16,13 +16,13 @@ from pathlib import Path
 from typing import Any
 
 from crllk.errors import ConfigError
-from crllk.files import read_yaml
 from crllk.maps import DuckietownMap, load_map
 from crllk.paths import task_file, task_name_problem, task_names
 from crllk.sim.constants import PHYSICS_TIMESTEP
 from crllk.sim.motor import MotorConfig
 from crllk.tasks.constraints import AGGREGATES, BUILTIN, DEFAULT, SIGNALS, Constraint
 from crllk.tasks.randomization import RandomizeConfig, parse_randomize
+from crllk.yaml_files import read_yaml
 
 
 @dataclass(frozen=True)

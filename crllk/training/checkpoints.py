@@ -1,7 +1,16 @@
-"""Checkpoints of training runs, written atomically and stamped with a format version."""
+"""Checkpoints of training runs, written atomically and stamped with a format version.
+
+A checkpoint or kept policy holds tensors and plain containers only (:mod:`crllk.training.plain`)
+and is read with ``torch.load(weights_only=True)``, so that reading a file cannot run code; a
+file that needs more (a checkpoint of an older format, or one crafted to run code) is refused,
+and ``python -m crllk.convert`` converts one the user trusts (:mod:`crllk.convert`).
+"""
 
 from __future__ import annotations
 
+import pickle
+import re
+import shlex
 from pathlib import Path
 from typing import Any
 
@@ -15,19 +24,76 @@ from crllk.files import atomic_write
 from crllk.rl.lagrange import Multiplier, multiplier_from_state
 from crllk.training.build import Learner, TrainingEnv, keeps_snapshots
 from crllk.training.config import TrainConfig
+from crllk.training.plain import first_non_plain, tensordict_from_plain, tensordict_to_plain
 
-CHECKPOINT_FORMAT = 3
+CHECKPOINT_FORMAT = 4
 """Version of the checkpoint layout written by :mod:`crllk.training.loop` (2: constraints by
-name, the task's episode state whole; 3: each simulation's action stream)."""
-READABLE_FORMATS = (2, 3)
-"""Formats whose policy (actor, counters, multipliers) this version reads; only
-:data:`CHECKPOINT_FORMAT` resumes."""
+name, the task's episode state whole; 3: each simulation's action stream; 4: format 3 in
+tensors and plain containers only, read without running code)."""
+READABLE_FORMATS = (2, 3, 4)
+"""Formats whose policy (actor, counters, multipliers) this version reads, from a file that
+loads without running code (every kept ``policy.pt``; checkpoints of formats 2 and 3 once
+converted); only :data:`CHECKPOINT_FORMAT` resumes."""
+CONVERTED_FORMATS = {3: 4}
+"""The format a checkpoint of an older one takes once converted to plain types
+(:func:`crllk.convert.convert_file`), where the newer format is the older one in plain types;
+other formats keep their number."""
+CONVERT_COMMAND = "python -m crllk.convert"
+
+
+class UnsafeFileError(ConfigError):
+    """A file that only a full unpickling reads, which may run code: refused."""
 
 
 def save_checkpoint(path: str | Path, state: dict[str, Any]) -> Path:
     """Saves ``state`` with ``torch.save`` atomically, stamped with the format version."""
-    return atomic_write(path, lambda handle: torch.save(
-        {"format": CHECKPOINT_FORMAT, **state}, handle))
+    return write_state(path, {"format": CHECKPOINT_FORMAT, **state})
+
+
+def write_state(path: str | Path, state: dict[str, Any]) -> Path:
+    """Writes a checkpoint's ``state`` (format included) atomically.
+
+    Raises:
+        TypeError: if ``state`` holds anything but tensors and plain containers (it would
+            not load without running code).
+    """
+    problem = first_non_plain(state)
+    if problem:
+        raise TypeError(f"checkpoint {path}: only tensors and plain containers are saved, "
+                        f"got {problem}")
+    return atomic_write(path, lambda handle: torch.save(state, handle))
+
+
+def read_state(path: str | Path, *, trust: bool = False) -> object:
+    """What ``torch.save`` wrote to ``path``, read with ``weights_only=True``; only with
+    ``trust`` by a full unpickling, which runs whatever code the file names.
+
+    Raises:
+        UnsafeFileError: without ``trust``, if the file holds more than tensors and plain
+            containers.
+        ConfigError: if the file cannot be read or is damaged.
+    """
+    path = Path(path)
+    try:
+        return torch.load(path, map_location="cpu", weights_only=not trust)
+    except OSError as err:
+        raise ConfigError(path, "<file>", f"cannot read: {err.strerror or err}") from None
+    except pickle.UnpicklingError as err:
+        if trust:
+            raise ConfigError(path, "<file>", f"not a readable checkpoint: {_first_line(err)}"
+                              ) from None
+        named = re.search(r"GLOBAL ([\w.]+)", str(err))
+        raise UnsafeFileError(path, "<file>", (
+            f"holds pickled Python objects{f' ({named[1]})' if named else ''}, and loading "
+            "them may execute code: refused. An older checkpoint you trust converts with "
+            f"{CONVERT_COMMAND} path={shlex.quote(str(path))} trust=true")) from None
+    except Exception as err:  # torch raises RuntimeError, pickle errors, EOFError...
+        raise ConfigError(path, "<file>", f"not a readable checkpoint (damaged or truncated: "
+                          f"{_first_line(err)})") from None
+
+
+def _first_line(err: BaseException) -> str:
+    return str(err).splitlines()[0] if str(err) else type(err).__name__
 
 
 POLICY_FILE = Path("policy.pt")
@@ -55,15 +121,18 @@ def policy_info(state: dict[str, Any]) -> dict[str, Any]:
 def load_checkpoint(path: str | Path, *, resuming: bool = False) -> dict[str, Any]:
     """Loads a checkpoint written by :func:`save_checkpoint` (of any of
     :data:`READABLE_FORMATS`; only of :data:`CHECKPOINT_FORMAT` when ``resuming``)."""
-    path = Path(path)
-    try:
-        state = torch.load(path, map_location="cpu", weights_only=False)
-    except OSError as err:
-        raise ConfigError(path, "<file>", f"cannot read: {err.strerror or err}") from None
-    except Exception as err:  # torch raises RuntimeError, pickle errors, EOFError...
-        reason = str(err).splitlines()[0] if str(err) else type(err).__name__
-        raise ConfigError(path, "<file>", f"not a readable checkpoint (damaged or truncated: "
-                          f"{reason})") from None
+    state = read_state(path)
+    check_format(path, state, resuming=resuming)
+    return state  # type: ignore[return-value]
+
+
+def check_format(path: str | Path, state: object, *, resuming: bool = False) -> None:
+    """Refuses ``state`` unless it is a checkpoint of :data:`READABLE_FORMATS` (only
+    :data:`CHECKPOINT_FORMAT` when ``resuming``).
+
+    Raises:
+        ConfigError: naming ``path`` and the format.
+    """
     if not isinstance(state, dict) or "format" not in state:
         raise ConfigError(path, "format", "not a crllk checkpoint")
     readable = (CHECKPOINT_FORMAT,) if resuming else READABLE_FORMATS
@@ -72,7 +141,6 @@ def load_checkpoint(path: str | Path, *, resuming: bool = False) -> dict[str, An
                           f"{'resumes' if resuming else 'reads'} format "
                           f"{' and '.join(map(str, readable))}: resume it with the version "
                           "that wrote it, or start a new run")
-    return state
 
 
 def checkpoint_state(config: TrainConfig, learner: Learner, multipliers: dict[str, Multiplier],
@@ -91,7 +159,7 @@ def checkpoint_state(config: TrainConfig, learner: Learner, multipliers: dict[st
         "multipliers": {name: m.state_dict() for name, m in multipliers.items()},
         "episodes": episodes.state_dict() if snapshots else None,
         "env": env.sim_state() if snapshots else None,
-        "carry": carry.clone() if snapshots else None,
+        "carry": tensordict_to_plain(carry.clone()) if snapshots else None,
         "torch_rng": torch.get_rng_state(),
         "generator": generator.get_state(),
         "action_noise": learner.action_noise.states(),
@@ -102,7 +170,7 @@ def restore(state: dict[str, Any], learner: Learner, multipliers: dict[str, Mult
             episodes: EpisodeAccumulator, env: TrainingEnv, generator: torch.Generator) -> bool:
     """Loads a checkpoint into the run's parts. Returns whether the simulations continue
     exactly where they were (their state and the running episode sums restored, and
-    ``state["carry"]`` to continue from); if the checkpoint has no simulations' state or
+    :func:`resumed_carry` to continue from); if the checkpoint has no simulations' state or
     ``env`` cannot take one (remote collectors), episodes start afresh."""
     learner.actor.load_state_dict(state["actor"])
     for name, critic in learner.critics.items():
@@ -119,3 +187,8 @@ def restore(state: dict[str, Any], learner: Learner, multipliers: dict[str, Mult
     generator.set_state(state["generator"])
     learner.action_noise.load_states(state["action_noise"])
     return exact
+
+
+def resumed_carry(state: dict[str, Any]) -> TensorDictBase:
+    """The tensordict collection continues from, as :func:`checkpoint_state` kept it."""
+    return tensordict_from_plain(state["carry"])

@@ -19,9 +19,9 @@ from omegaconf import DictConfig
 from omegaconf.errors import OmegaConfBaseException
 
 from crllk.errors import ConfigError
-from crllk.files import read_yaml
 from crllk.paths import task_file, task_names
 from crllk.training.config import CLUSTER_EXTRA, SOURCE, register_schema
+from crllk.yaml_files import read_yaml
 
 CONFIG_MODULE = "crllk.conf"
 CONFIG_NAME = "train"
@@ -49,6 +49,8 @@ def compose_config(overrides: Sequence[str] = ()) -> DictConfig:
     """
     register()
     overrides = task_paths_as_task_file(overrides)
+    for problem in task_file_problems(overrides):
+        raise problem
     try:
         with initialize_config_module(config_module=CONFIG_MODULE, version_base="1.3"):
             return compose(config_name=CONFIG_NAME, overrides=overrides)
@@ -65,6 +67,19 @@ def task_paths_as_task_file(overrides: Iterable[str]) -> list[str]:
         out.append(f"task_file={value}" if sep and key == "task"
                    and value.endswith((".yaml", ".yml")) else override)
     return out
+
+
+def task_file_problems(overrides: Iterable[str]) -> list[ConfigError]:
+    """A one-line error for each ``task.<key>=...`` given with a task file: the file holds its
+    task's settings (the composed ``task`` is the default task's, which the run never reads),
+    so the change would be dropped without a word."""
+    overrides = list(overrides)
+    if not any(o.partition("=")[0].lstrip("+~") == "task_file" for o in overrides):
+        return []
+    return [ConfigError(SOURCE, key, "a task file's settings are set in the file; task.* "
+                        "changes apply to named tasks (edit a copy of the file)")
+            for key in (o.partition("=")[0].lstrip("+~") for o in overrides)
+            if key.startswith("task.")]
 
 
 LAUNCHER_PLUGINS = {
@@ -121,4 +136,4 @@ def _first_key(overrides: Sequence[str]) -> str:
 
 
 __all__ = ["LAUNCHER_PLUGINS", "compose_config", "composition_error", "launcher_problems",
-           "register", "task_paths_as_task_file"]
+           "register", "task_file_problems", "task_paths_as_task_file"]

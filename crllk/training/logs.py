@@ -5,6 +5,7 @@ from __future__ import annotations
 import csv
 import io
 import math
+import os
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -13,7 +14,7 @@ import torch
 from tensordict import TensorDictBase
 
 import crllk  # noqa: F401  (chooses the headless GL backend before torchrl imports mujoco)
-from crllk.files import atomic_write_text
+from crllk.files import atomic_write_text, open_no_follow, read_csv_rows, writing
 from crllk.tasks.constraints import Constraint
 from crllk.training.config import TrainConfig
 
@@ -21,31 +22,45 @@ DISCRETE_ACTION_NAMES = ("left", "right", "straight")
 
 
 class CsvLog:
-    """A CSV file with a fixed header, one row appended (and flushed) at a time."""
+    """A CSV file with a fixed header, one row appended (and flushed) at a time; opened without
+    following a link (a symbolic link planted at its path is refused, naming it)."""
 
     def __init__(self, path: Path, columns: Sequence[str]):
         self.path = path
         self.columns = list(columns)
 
     def append(self, row: dict[str, Any]) -> None:
-        new = not self.path.exists()
-        with self.path.open("a", newline="") as handle:
+        """Appends ``row`` (its line written at once, after the header if the file is new).
+
+        Raises:
+            WriteError: naming the file, if it is a symbolic link or cannot be written.
+        """
+        fd = open_no_follow(self.path, os.O_WRONLY | os.O_APPEND | os.O_CREAT)
+        with writing(self.path), os.fdopen(fd, "w", newline="", encoding="utf-8") as handle:
             writer = csv.DictWriter(handle, fieldnames=self.columns)
-            if new:
+            if os.fstat(fd).st_size == 0:
                 writer.writeheader()
             writer.writerow({k: _format(row.get(k, "")) for k in self.columns})
 
     def truncate_after(self, iteration: int) -> None:
-        """Drops rows of iterations after ``iteration`` (written after the last checkpoint)."""
-        if not self.path.exists():
+        """Drops rows of iterations after ``iteration`` (written after the last checkpoint) and
+        a last row that a kill cut short (:func:`crllk.files.read_csv_rows`)."""
+        header, rows = read_csv_rows(self.path)
+        if not header:
             return
-        with self.path.open(newline="") as handle:
-            rows = [r for r in csv.DictReader(handle) if int(r["iteration"]) <= iteration]
+        kept = [r for r in rows if _iteration(r) is not None and _iteration(r) <= iteration]
         buffer = io.StringIO()
         writer = csv.DictWriter(buffer, fieldnames=self.columns, lineterminator="\r\n")
         writer.writeheader()
-        writer.writerows(rows)
+        writer.writerows(kept)
         atomic_write_text(self.path, buffer.getvalue())
+
+
+def _iteration(row: dict[str, str]) -> int | None:
+    try:
+        return int(row["iteration"])
+    except (KeyError, ValueError):
+        return None
 
 
 def _format(value: Any) -> Any:
@@ -99,10 +114,7 @@ def progress_text(row: dict[str, Any], constraints: Sequence[Constraint]) -> str
 def print_last_evaluation(path: Path, config: TrainConfig,
                           constraints: Sequence[Constraint]) -> None:
     """One line on the latest evaluation in ``eval.csv``, if there is one."""
-    if not path.exists():
-        return
-    with path.open(newline="") as handle:
-        rows = list(csv.DictReader(handle))
+    _, rows = read_csv_rows(path)
     if not rows:
         return
     last = rows[-1]

@@ -40,7 +40,7 @@ from crllk.envs.distributed import RayLaneKeepingCollector
 from crllk.envs.episodes import EpisodeAccumulator, EpisodeStats, summarise
 from crllk.envs.parallel import LaneKeepingEnv, ParallelLaneKeepingEnv
 from crllk.errors import ConfigError
-from crllk.files import atomic_write_text
+from crllk.files import atomic_write_text, remove_stale_temp_files
 from crllk.rl.collection import collect_in_workers
 from crllk.rl.lagrange import Multiplier
 from crllk.rl.rollout import EvaluationResult, collect, run_episodes
@@ -54,6 +54,7 @@ from crllk.training.checkpoints import (
     policy_info,
     policy_state,
     restore,
+    resumed_carry,
     save_checkpoint,
 )
 from crllk.training.config import TrainConfig
@@ -106,7 +107,7 @@ def train(config: TrainConfig, on_final_evaluation: FinalEvaluation | None = Non
     if resuming:
         state = load_checkpoint(checkpoint_path, resuming=True)
         exact = restore(state, learner, multipliers, episodes, env, generator)
-        carry = state["carry"] if exact else first_carry(env)
+        carry = resumed_carry(state) if exact else first_carry(env)
         iteration, frames, elapsed = state["iteration"], state["frames"], state["elapsed"]
         metrics.truncate_after(iteration)
         evaluations.truncate_after(iteration)
@@ -236,14 +237,14 @@ def torch_threads(count: int) -> Iterator[None]:
 
 def prepare_run_dir(config: TrainConfig, run_dir: Path, checkpoint_path: Path) -> bool:
     """Whether the run resumes from ``checkpoint_path``; clears the logs of a run killed
-    before its first checkpoint, and the temporary files of writes a kill interrupted (the
-    run's lock is held, so no other writer is at work).
+    before its first checkpoint, and the temporary files of writes a kill interrupted (those
+    whose writer is gone: an evaluation may be writing into the run meanwhile).
 
     Raises:
         ConfigError: if ``run_dir`` holds a run and ``resume`` is off.
     """
-    for leftover in run_dir.glob(".*.tmp"):
-        leftover.unlink(missing_ok=True)
+    for folder in (run_dir, checkpoint_path.parent, run_dir / "recordings"):
+        remove_stale_temp_files(folder)
     resuming = config.resume and checkpoint_path.exists()
     if not resuming and (run_dir / "metrics.csv").exists():
         if not config.resume:

@@ -10,7 +10,6 @@ exported.
 
 from __future__ import annotations
 
-import csv
 import json
 import math
 from pathlib import Path
@@ -22,6 +21,7 @@ from omegaconf import OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
 from crllk.errors import ConfigError
+from crllk.files import read_csv_rows
 from crllk.training.checkpoints import (
     POLICY_FILE,
     load_checkpoint,
@@ -113,15 +113,12 @@ def load_actor(run_dir: str | Path, env: Any) -> tuple[torch.nn.Module, dict[str
 
 def read_csv(path: str | Path) -> dict[str, np.ndarray]:
     """A CSV log as columns of floats (empty cells and ``nan`` become NaN); ``{}`` if the
-    file does not exist."""
-    path = Path(path)
-    if not path.is_file():
-        return {}
-    with path.open(newline="") as handle:
-        rows = list(csv.DictReader(handle))
+    file does not exist. A last row cut short by a kill is left out
+    (:func:`crllk.files.read_csv_rows`)."""
+    header, rows = read_csv_rows(path)
     if not rows:
         return {}
-    return {key: np.array([_number(row[key]) for row in rows]) for key in rows[0]}
+    return {key: np.array([_number(row[key]) for row in rows]) for key in header}
 
 
 def read_metrics(run_dir: str | Path) -> dict[str, np.ndarray]:
