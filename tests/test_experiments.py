@@ -60,6 +60,9 @@ def test_map_tables_and_figure1_are_written(tiny_experiments):
         assert sum(entry["test_episode"]["actions"].values()) > 0
     for name in ("figure1_curves.png", "figure1_actions.png", "figure1_tradeoff.png"):
         assert (results / name).read_bytes()[:4] == b"\x89PNG"
+    assert len(figure["thresholds"]["0.08"]["mode_evaluations"]) == 1
+    words = (results / "figure1.md").read_text()
+    assert words.count("\n| 0.") == 4 and "deployed mode" in words
     assert (runs / "small_loop" / "CRLLK-D-a0.08-seed0" / "eval.json").exists()
     config = (runs / "small_loop" / "CRLLK-D-a0.08-seed0" / "config.yaml").read_text()
     assert "threshold: 0.08" in config
@@ -81,6 +84,36 @@ def test_figure1_tradeoff_sets_crllk_against_the_sweep():
     assert [[0.1, 2.55]] in [[[round(x, 6), round(y, 6)] for x, y in o] for o in stars]
     assert [line.get_xdata()[0] for line in ax.lines] == [0.1, 0.5]
     assert len(draw_figure1_tradeoff(data, None).axes[0].collections) == 4
+
+
+def _pair(lane_weight: float, lane: list[float], coll: list[float], travel: float) -> dict:
+    return {"lane_weight": lane_weight, "collision_weight": 4.0, "J_clane": {
+        "mean": sum(lane) / len(lane), "values": lane}, "J_coll": {"values": coll},
+        "J_R": {"mean": travel}}
+
+
+def test_figure1_words_compare_with_the_farthest_fixed_pair_holding_on_every_seed():
+    """At α1 = 0.1 the 0.3 pair misses on one seed (0.12 dm) and the 10 pair collides, so the
+    1 pair (2.60 m) is the one to beat: CRLLK-D's 2.55 m is 0.05 m short."""
+    from crllk.experiments.figure1 import best_fixed_pair, figure1_markdown
+
+    fixed = [_pair(0.3, [0.08, 0.12], [0.0, 0.0], 2.78), _pair(1, [0.07, 0.09], [0.0, 0.01], 2.60),
+             _pair(3, [0.07, 0.07], [0.0, 0.0], 2.50), _pair(10, [0.06, 0.06], [0.0, 0.03], 2.70)]
+    assert best_fixed_pair(fixed, 0.1, 0.02)["lane_weight"] == 1
+    assert best_fixed_pair(fixed, 0.065, 0.02) is None
+    summary = {"J_clane": 0.09, "J_coll": 0.0, "J_R": 2.5}
+    data = {"settings": {"obs": "pixels", "episodes": 400, "seeds": [0, 1], "command": "c",
+                         "frames": 10, "machine": "m"},
+            "thresholds": {"0.1": {"evaluations": [summary, {**summary, "J_R": 2.6}],
+                                   "mode_evaluations": [{**summary, "J_clane": 0.11}],
+                                   "final_lambda_lane": [0.5, 0.25]}}}
+    words = figure1_markdown(data, {"thresholds": {"collision": 0.02},
+                                    "maps": {"small_loop": {"fixed": fixed}}})
+    assert "| 0.1 | 0.090 / 0.000 / 2.50; 0.090 / 0.000 / 2.60 | 0.110 / 0.000 / 2.50 | " \
+           "0.500, 0.250 | 1/4: 0.080 / 2.60 |" in words
+    assert ("α1 = 0.1: the sampled policy holds both constraints on every seed (J_clane 0.090 "
+            "dm, J_R 2.55 m), -0.05 m against the best fixed pair that holds (1/4); the "
+            "deployed mode misses (J_clane 0.110 dm).") in words
 
 
 def test_every_seed_is_written_beside_the_tables(tiny_experiments):

@@ -22,7 +22,7 @@ from torchrl.envs.utils import ExplorationType, set_exploration_type, step_mdp
 
 from crllk.evaluation.report import episode_cost
 from crllk.files import atomic_write
-from crllk.protocol import TEST_EVALUATION
+from crllk.protocol import TEST_EVALUATION, TEST_MODE_EVALUATION
 from crllk.tasks.actions import DISCRETE_NAMES
 from crllk.training.build import build_env
 from crllk.training.runs import load_actor, load_run_config, read_eval_json, read_metrics
@@ -126,7 +126,8 @@ def figure1_data(by_threshold: Mapping[float, Sequence[Path]],
                  settings: Mapping[str, Any]) -> dict[str, Any]:
     """Everything Figure 1 draws, from the run directories: per lane threshold the learning
     curves (mean and range over seeds of the smoothed training metrics), the action counts of
-    one test episode (evaluation episode 0 of the first seed) and the final evaluations."""
+    one test episode (evaluation episode 0 of the first seed) and the test evaluations of the
+    sampled policy and, where made, of the deployed one (its mode)."""
     data: dict[str, Any] = {"settings": dict(settings), "thresholds": {}}
     for threshold, run_dirs in by_threshold.items():
         curves = {}
@@ -142,6 +143,9 @@ def figure1_data(by_threshold: Mapping[float, Sequence[Path]],
                              "J_clane": episode_cost(episode, "lane"),
                              "collisions": episode_cost(episode, "collision")},
             "evaluations": [read_eval_json(d, TEST_EVALUATION)["summary"] for d in run_dirs],
+            "mode_evaluations": [read_eval_json(d, TEST_MODE_EVALUATION)["summary"]
+                                 for d in run_dirs
+                                 if (d / f"{TEST_MODE_EVALUATION}.json").is_file()],
             "final_lambda_lane": [float(read_metrics(d)["lambda_lane"][-1]) for d in run_dirs]}
     return data
 

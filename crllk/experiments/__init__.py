@@ -37,6 +37,7 @@ from pathlib import Path
 from crllk.cli import Parser
 from crllk.errors import ConfigError
 from crllk.evaluation.robustness import conditions
+from crllk.experiments.figure1 import figure1_markdown
 from crllk.experiments.robustness import robustness
 from crllk.experiments.runs import (
     AGENTS,
@@ -56,7 +57,7 @@ from crllk.experiments.runs import (
 from crllk.experiments.sweep import sweep, sweep_markdown, sweep_specs
 from crllk.experiments.tables import settings_dict, table_markdown, write_table
 from crllk.experiments.teacher import teacher
-from crllk.files import write_problem
+from crllk.files import atomic_write_text, write_problem
 from crllk.training.compose import compose_config
 from crllk.training.config import validate
 
@@ -98,8 +99,12 @@ def figure1(settings: Settings) -> list[Path]:
                     for t in settings.figure_thresholds}
     sweep_path = settings.results / "sweep.json"
     sweep_document = json.loads(sweep_path.read_text()) if sweep_path.is_file() else None
-    return figure1_pictures(by_threshold, settings.results, settings_dict(settings),
-                            sweep_document)
+    paths = figure1_pictures(by_threshold, settings.results, settings_dict(settings),
+                             sweep_document)
+    data = json.loads((settings.results / "figure1.json").read_text())
+    words = atomic_write_text(settings.results / "figure1.md",
+                              figure1_markdown(data, sweep_document))
+    return [*paths, words]
 
 
 EXPERIMENTS = {"table1": table1, "maps": maps, "figure1": figure1, "sweep": sweep,
