@@ -461,3 +461,19 @@ def test_teacher_ablation(tmp_path):
     assert "final: 0.0" in annealed and "frames: 400000" in annealed
     test = read_eval_json(runs / "CRLLK-D-teacher0-a0.5-seed0", TEST_EVALUATION)
     assert test["evaluation"]["seed"] == TEST_SEED
+
+
+def test_crllk_agents_train_three_seeds_and_baselines_two():
+    """The tables' claims about the CRLLK agents rest on three seeds; the text says which."""
+    from crllk.experiments.runs import Settings, agent_seeds
+    from crllk.experiments.tables import seeds_text
+
+    settings = Settings()
+    assert agent_seeds(settings, "CRLLK-C") == (0, 1, 2)
+    assert agent_seeds(settings, "PPO-D") == (0, 1)
+    document = {"seeds": [0, 1], "crllk_seeds": [0, 1, 2]}
+    assert seeds_text(document, ["CRLLK-D", "PPO-D"]) == \
+        "0, 1, 2 (CRLLK agents) and 0, 1 (fixed-weight baselines)"
+    assert seeds_text(document, ["CRLLK-D"]) == "0, 1, 2"
+    assert seeds_text(document, ["PPO-C"]) == "0, 1"
+    assert seeds_text({"seeds": [3]}, ["CRLLK-D", "PPO-D"]) == "3"

@@ -52,6 +52,7 @@ from crllk.experiments.runs import (
     SWEEP_TASKS,
     RunSpec,
     Settings,
+    agent_seeds,
     train_and_evaluate,
 )
 from crllk.experiments.sweep import sweep, sweep_markdown, sweep_specs
@@ -67,7 +68,8 @@ __all__ = ["AGENTS", "ALL", "EXPERIMENTS", "PAPER_TABLE1", "check_settings", "fi
 
 def table1(settings: Settings) -> Path:
     agents = list(settings.agents)
-    specs = [RunSpec(agent, "small_loop", seed) for agent in agents for seed in settings.seeds]
+    specs = [RunSpec(agent, "small_loop", seed) for agent in agents
+             for seed in agent_seeds(settings, agent)]
     outcome = train_and_evaluate(specs, settings)
     return write_table("table1", "Table 1: small_loop", "small_loop", agents, outcome,
                        settings, PAPER_TABLE1, _pairs(agents))
@@ -76,7 +78,7 @@ def table1(settings: Settings) -> Path:
 def maps(settings: Settings) -> list[Path]:
     agents = list(settings.agents)
     specs = [RunSpec(agent, task, seed) for task in MAP_TASKS for agent in agents
-             for seed in settings.seeds]
+             for seed in agent_seeds(settings, agent)]
     outcome = train_and_evaluate(specs, settings)
     return [write_table(f"table_{task}", f"CRLLK vs PPO: {task}", task, agents, outcome,
                         settings, None, _pairs(agents))
@@ -121,7 +123,8 @@ def check_settings(settings: Settings) -> None:
         ConfigError: naming the override or the folder.
     """
     for agent in settings.agents:
-        overrides = [f"agent={agent}", f"obs={settings.obs}", f"seed={min(settings.seeds)}",
+        seed = min(agent_seeds(settings, agent))
+        overrides = [f"agent={agent}", f"obs={settings.obs}", f"seed={seed}",
                      f"total_frames={settings.frames}", *settings.train_overrides]
         validate(compose_config(overrides))
     for option, folder in (("--runs-root", settings.runs_root), ("--results", settings.results)):
@@ -136,7 +139,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--frames", type=int, default=None,
                         help=f"environment frames per training run (pixels: {PIXEL_FRAMES:,}, "
                              f"state: {STATE_FRAMES:,}, the trainer's defaults)")
-    parser.add_argument("--seeds", type=int, nargs="+", default=list(Settings.seeds))
+    parser.add_argument("--seeds", type=int, nargs="+", default=None,
+                        help=f"training seeds of every run (default: "
+                             f"{' '.join(map(str, Settings.seeds))}, and "
+                             f"{' '.join(map(str, Settings.crllk_seeds))} for the CRLLK agents "
+                             f"of table1 and maps)")
+    parser.add_argument("--crllk-seeds", type=int, nargs="+", default=None,
+                        help="table1 and maps: the CRLLK agents' training seeds (default: "
+                             "--seeds where given)")
     parser.add_argument("--agents", nargs="+", choices=list(AGENTS), default=list(AGENTS),
                         help="table1 and maps: the agents to train and tabulate")
     parser.add_argument("--episodes", type=int, default=Settings.episodes,
@@ -172,7 +182,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     if not all(0 < t < float("inf") for t in args.thresholds):
         parser.error(f"--thresholds must be finite numbers above 0, got {args.thresholds}")
     command = "python -m crllk.experiments " + shlex.join(sys.argv[1:] if argv is None else argv)
-    settings = Settings(frames=args.frames, seeds=tuple(args.seeds), episodes=args.episodes,
+    seeds = tuple(args.seeds or Settings.seeds)
+    crllk_seeds = tuple(args.crllk_seeds or args.seeds or Settings.crllk_seeds)
+    settings = Settings(frames=args.frames, seeds=seeds, crllk_seeds=crllk_seeds,
+                        episodes=args.episodes,
                         obs=args.obs, jobs=args.jobs, runs_root=args.runs_root / args.obs,
                         results=args.results / args.obs, command=command,
                         train_overrides=tuple(args.set), agents=tuple(args.agents),

@@ -151,7 +151,7 @@ def table_markdown(document: dict[str, Any]) -> str:
         f"# {document['title']}", "",
         f"Map `{document['task']}`, α1 = {thresholds['lane']} dm, α2 = "
         f"{thresholds['collision']} collisions per episode. Mean ± std (population, ddof 0) "
-        f"across training seeds {', '.join(map(str, settings['seeds']))}.", "",
+        f"across training seeds {seeds_text(settings, agents)}.", "",
         f"- Observation: `{obs}`" + (" (lane-relative features, not the camera)"
                                      if obs == "state" else " (the 30×40 camera image)") + ".",
         f"- Budget: {settings['frames']:,} environment frames per run (training wall time "
@@ -214,9 +214,25 @@ def write_table(name: str, title: str, task: str, agents: Sequence[str], outcome
 
 def settings_dict(settings: Settings) -> dict[str, Any]:
     return {"frames": settings.frames, "seeds": list(settings.seeds),
+            "crllk_seeds": list(settings.crllk_seeds),
             "train_overrides": list(settings.train_overrides),
             "episodes": settings.episodes, "obs": settings.obs, "eval_seed": settings.eval_seed,
             "jobs": settings.jobs, "command": settings.command, "machine": machine_text()}
+
+
+def seeds_text(settings: dict[str, Any], agents: Sequence[str]) -> str:
+    """The training seeds of a table's ``agents``: ``0, 1`` or ``0, 1, 2 (CRLLK agents) and 0, 1
+    (fixed-weight baselines)`` (documents older than per-agent seeds: ``seeds`` for all)."""
+    seeds = settings["seeds"]
+    crllk = settings.get("crllk_seeds", seeds)
+    has_crllk = any(a.startswith("CRLLK") for a in agents)
+    has_fixed = any(not a.startswith("CRLLK") for a in agents)
+    if crllk == seeds or not has_crllk:
+        return ", ".join(map(str, seeds))
+    if not has_fixed:
+        return ", ".join(map(str, crllk))
+    return (f"{', '.join(map(str, crllk))} (CRLLK agents) and {', '.join(map(str, seeds))} "
+            "(fixed-weight baselines)")
 
 
 def invocation(outcome: Outcome) -> dict[str, Any]:
