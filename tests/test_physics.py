@@ -437,3 +437,25 @@ def test_llvmpipe_draws_on_the_calling_thread_unless_the_user_says_otherwise(giv
     out = subprocess.run([sys.executable, "-c", probe], env=env, capture_output=True,
                          text=True, check=True).stdout.strip()
     assert out == expected
+
+
+def test_the_mjcf_servos_have_the_documented_gains(physics_for):
+    """Each velocity servo's bias is -kv and its gain kv times the ctrl-to-tendon-speed factor
+    (1/R forward, b/R turning), with the constants' kv, R and b."""
+    import mujoco
+
+    from crllk.sim.constants import (
+        FORWARD_ACTUATOR,
+        FORWARD_SERVO_GAIN,
+        TURN_ACTUATOR,
+        TURN_SERVO_GAIN,
+        WHEEL_DISTANCE,
+        WHEEL_RADIUS,
+    )
+
+    model = physics_for().model.ptr
+    for name, kv, factor in ((FORWARD_ACTUATOR, FORWARD_SERVO_GAIN, 1 / WHEEL_RADIUS),
+                             (TURN_ACTUATOR, TURN_SERVO_GAIN, WHEEL_DISTANCE / WHEEL_RADIUS)):
+        actuator = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_ACTUATOR, name)
+        assert model.actuator_biasprm[actuator, 2] == pytest.approx(-kv)
+        assert model.actuator_gainprm[actuator, 0] == pytest.approx(kv * factor, rel=1e-4)

@@ -31,7 +31,6 @@ from crllk.recording.blueprint import scene_views
 from crllk.recording.viewer import VIEWER_HOST, check_port_free, free_port, start_viewer
 from crllk.tasks.constraints import Constraint
 
-LIVE_MODES = ("none", "serve", "spawn")
 LIVE_PORT = 9877
 """Default port of the live stream's server (the viewer's own default is 9876)."""
 APPLICATION_ID = "crllk-train"
@@ -153,5 +152,5 @@ def open_live(mode: str, port: int, recording_id: str, constraints: Sequence[Con
     return live, problems
 
 
-__all__ = ["APPLICATION_ID", "LIVE_MODES", "LIVE_PORT", "PREFIX", "THRESHOLD", "LiveView",
+__all__ = ["APPLICATION_ID", "LIVE_PORT", "PREFIX", "THRESHOLD", "LiveView",
            "live_blueprint", "live_url", "open_live", "series", "server_sink"]

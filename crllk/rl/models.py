@@ -30,7 +30,6 @@ from torchrl.modules import ProbabilisticActor, TanhNormal, ValueOperator
 from crllk.rl.model_config import ModelConfig
 
 PIXEL_SCALE = 1.0 / 255.0  # uint8 camera value -> [0, 1]
-ENCODERS = ("fast", "original", "mlp")
 
 
 class PixelScale(nn.Module):
@@ -258,10 +257,5 @@ def make_shared_critic(observation: str, observation_shape: Sequence[int], confi
                          out_keys=list(out_keys))
 
 
-def count_parameters(module: nn.Module) -> int:
-    """Number of trainable parameters."""
-    return sum(p.numel() for p in module.parameters() if p.requires_grad)
-
-
-__all__ = ["ENCODERS", "ModelConfig", "count_parameters", "make_actor", "make_critic",
+__all__ = ["ModelConfig", "make_actor", "make_critic",
            "make_encoder", "make_shared_critic"]

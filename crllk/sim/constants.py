@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 ROBOT_PREFIX = "duckiebot/"
-CHASSIS = ROBOT_PREFIX + "chassis"
 ROOT_JOINT = ROBOT_PREFIX + "root"
 FOOTPRINT_GEOM = ROBOT_PREFIX + "footprint"
 LEFT_WHEEL_JOINT = ROBOT_PREFIX + "left_wheel"

@@ -53,18 +53,6 @@ def load_run_config(run_dir: str | Path) -> TrainConfig:
     return validate(upgrade(stored))
 
 
-def load_run_checkpoint(run_dir: str | Path) -> dict[str, Any]:
-    """The run's last checkpoint (see ``crllk.training.checkpoints.checkpoint_state``).
-
-    Raises:
-        ConfigError: if the run has no checkpoint yet.
-    """
-    path = Path(run_dir) / CHECKPOINT_FILE
-    if not path.is_file():
-        raise ConfigError(run_dir, "run", f"no checkpoint yet ({CHECKPOINT_FILE})")
-    return load_checkpoint(path)
-
-
 def has_policy(run_dir: str | Path) -> bool:
     """Whether the run has a policy to act with: a checkpoint or its kept ``policy.pt``."""
     return (Path(run_dir) / CHECKPOINT_FILE).is_file() or (Path(run_dir) / POLICY_FILE).is_file()
@@ -146,5 +134,5 @@ def _number(text: str | None) -> float:
 
 
 __all__ = ["CHECKPOINT_FILE", "CONFIG_FILE", "EVAL_FILE", "POLICY_FILE", "has_policy",
-           "keep_policy", "load_actor", "load_run_checkpoint", "load_run_config",
+           "keep_policy", "load_actor", "load_run_config",
            "load_run_policy", "read_csv", "read_eval_json", "read_evaluations", "read_metrics"]
