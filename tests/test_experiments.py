@@ -477,3 +477,122 @@ def test_crllk_agents_train_three_seeds_and_baselines_two():
     assert seeds_text(document, ["CRLLK-D"]) == "0, 1, 2"
     assert seeds_text(document, ["PPO-C"]) == "0, 1"
     assert seeds_text({"seeds": [3]}, ["CRLLK-D", "PPO-D"]) == "3"
+
+
+def test_runs_on_map_files_sweep_apart_into_their_own_folders(tmp_path, monkeypatch):
+    """A run on a map file lives in ``<runs-root>/<file stem>/``; its multirun passes
+    ``task_file=`` (not ``task=``) and writes that folder out (the composed task name stays
+    the default one), one file per sweep; named tasks sweep as before."""
+    from crllk.experiments.realmaps import REAL_MAPS_DIR, realmaps_specs
+    from crllk.experiments.runs import RunSpec, Settings, sweep_commands
+
+    monkeypatch.chdir(REPO)
+    settings = Settings(runs_root=tmp_path, jobs=2, seeds=(0, 1))
+    specs = realmaps_specs(settings)
+    assert [s.directory(tmp_path).relative_to(tmp_path).as_posix() for s in specs] == [
+        "regress_4way_adam/CRLLK-D-a0.5-seed0", "regress_4way_adam/CRLLK-D-a0.5-seed1",
+        "ETH_small_intersect/CRLLK-D-a0.5-seed0", "ETH_small_intersect/CRLLK-D-a0.5-seed1"]
+    assert specs[0].task_file == "tests/data/real_maps/duckietown-world/regress_4way_adam.yaml"
+    assert (REAL_MAPS_DIR / "ETH_small_intersect.yaml").is_file()
+    named = RunSpec("CRLLK-D", "small_loop", 0)
+    commands = sweep_commands([*specs, named], settings)
+    assert len(commands) == 3
+    for command, stem in zip(commands, ("regress_4way_adam", "ETH_small_intersect"),
+                             strict=False):
+        assert f"task_file=tests/data/real_maps/duckietown-world/{stem}.yaml" in command
+        assert not any(a.startswith("task=") for a in command) and "seed=0,1" in command
+        assert (f"run_dir={tmp_path}/{stem}/${{hydra:runtime.choices.agent}}-a0.5"
+                "-seed${seed}") in command
+    assert "task=small_loop" in commands[2] and "seed=0" in commands[2]
+    assert f"run_dir={tmp_path}/${{task.name}}/${{hydra:runtime.choices.agent}}-a0.5" \
+           "-seed${seed}" in commands[2]
+    assert not any(a.startswith("task_file=") for a in commands[2])
+
+
+def test_realmaps_refuses_task_overrides_a_map_file_does_not_take():
+    from crllk.errors import ConfigError
+    from crllk.experiments.realmaps import check_map_runs, realmaps_specs
+    from crllk.experiments.runs import Settings
+
+    settings = Settings(seeds=(0,), train_overrides=("task.horizon=12",))
+    with pytest.raises(ConfigError, match=r"task\.horizon: a task file"):
+        check_map_runs(realmaps_specs(settings), settings)
+
+
+def _realmaps_entry(runs, clane, coll, intervals, terminations, hits):
+    constraints = [{"name": "lane", "metric": "J_clane", "unit": "dm"},
+                   {"name": "collision", "metric": "J_coll", "unit": "per episode"}]
+    return {"runs": runs, "constraints": constraints,
+            "J_clane": {"values": clane}, "J_coll": {"values": coll},
+            "J_R": {"values": [2.5] * len(runs)},
+            "satisfied": [a <= 0.5 and b <= 0.02 for a, b in zip(clane, coll, strict=True)],
+            "intervals": intervals, "terminations": terminations, "collisions_by_object": hits}
+
+
+def test_realmaps_markdown_worked_example():
+    """Hand-made document: seed 1 misses J_coll by 0.010 and says how its episodes ended and
+    what they hit; seed 0's mode holds on the point estimate but not at the upper bound; a map
+    where everything holds says so."""
+    from crllk.experiments.realmaps import realmaps_markdown
+
+    runs = ["r/regress_4way_adam/CRLLK-D-a0.5-seed0", "r/regress_4way_adam/CRLLK-D-a0.5-seed1"]
+    sampled = _realmaps_entry(
+        runs, [0.312, 0.41], [0.0, 0.03],
+        {"J_clane": [[0.29, 0.33], [0.38, 0.44]], "J_coll": [[0.0, 0.0095], [0.017, 0.051]]},
+        [{"time_limit": 400}, {"time_limit": 388, "collision": 12}],
+        [{}, {"14 barrier (1.60, 0.55)": 12}])
+    sampled["mode"] = _realmaps_entry(
+        runs, [0.2, 0.25], [0.01, 0.0],
+        {"J_clane": [[0.18, 0.22], [0.23, 0.27]], "J_coll": [[0.004, 0.025], [0.0, 0.0095]]},
+        [{"time_limit": 396, "off_road": 4}, {"time_limit": 400}], [{}, {}])
+    eth = _realmaps_entry(["r/ETH_small_intersect/CRLLK-D-a0.5-seed0"], [0.2], [0.0],
+                          {"J_clane": [[0.19, 0.21]], "J_coll": [[0.0, 0.0095]]},
+                          [{"time_limit": 400}], [{}])
+    document = {
+        "title": "Maps nobody tuned on: CRLLK-D (pixels)",
+        "thresholds": {"lane": 0.5, "collision": 0.02},
+        "settings": {"obs": "pixels", "frames": 500_000, "episodes": 400,
+                     "eval_seed": TEST_SEED, "command": "python -m crllk.experiments realmaps",
+                     "machine": "2 CPU cores"},
+        "wall_s": 60.0, "runs_total": 3, "runs_trained": 0, "evaluations_made": 0,
+        "maps": {"regress_4way_adam": {"file": "m/regress_4way_adam.yaml",
+                                       "about": "objects in the driving lane", **sampled},
+                 "ETH_small_intersect": {"file": "m/ETH_small_intersect.yaml",
+                                         "about": "intersections", **eth}}}
+    text = realmaps_markdown(document)
+    assert "## regress_4way_adam (`m/regress_4way_adam.yaml`)" in text
+    assert ("| 1 | 0.410 (0.38–0.44) / 0.03 (0.02–0.05) / 2.50 ✗ ✗ | "
+            "0.250 (0.23–0.27) / 0.00 (0.00–0.01) / 2.50 ✓ ✓ |") in text
+    assert ("- seed 1, sampled policy: J_coll 0.030 over 0.02 by 0.010 (95 % upper bound "
+            "0.051). Episodes ended: time_limit 388, collision 12. Objects hit (index, kind, "
+            "position in m): 14 barrier (1.60, 0.55) ×12.") in text
+    assert ("- seed 0, deployed policy (mode): J_coll 0.010 holds, its 95 % upper bound 0.025 "
+            "over 0.02 by 0.005. Episodes ended: time_limit 396, off_road 4. Objects hit: "
+            "none.") in text
+    assert "seed 0, sampled policy" not in text and "seed 1, deployed" not in text
+    eth_part = text.split("## ETH_small_intersect")[1]
+    assert "| 0 | 0.200 (0.19–0.21) / 0.00 (0.00–0.01) / 2.50 ✓ ✓ | — |" in eth_part
+    assert "Every run holds both constraints" in eth_part and "miss" not in eth_part
+
+
+@pytest.mark.slow
+def test_realmaps_at_a_tiny_budget(tmp_path):
+    """``experiments realmaps`` end to end (60-80 s): both map files trained from pixels
+    (the tiny budget without ``task.horizon``, which a map file refuses), tested on the test
+    seed, the Markdown rebuilt from the JSON."""
+    from crllk.experiments.realmaps import REALMAPS, realmaps_markdown
+
+    tiny = [a for a in TINY_EXPERIMENT if not a.startswith("task.")]
+    completed = subprocess.run(
+        [sys.executable, "-m", "crllk.experiments", "realmaps", *tiny,
+         "--runs-root", str(tmp_path / "runs"), "--results", str(tmp_path / "results")],
+        cwd=REPO, capture_output=True, text=True, timeout=600)
+    assert completed.returncode == 0, completed.stdout[-2000:] + completed.stderr[-2000:]
+    results = tmp_path / "results" / "pixels"
+    document = json.loads((results / "realmaps.json").read_text())
+    assert list(document["maps"]) == list(REALMAPS)
+    assert all("mode" in entry for entry in document["maps"].values())
+    assert (results / "realmaps.md").read_text() == realmaps_markdown(document)
+    run = tmp_path / "runs" / "pixels" / "regress_4way_adam" / "CRLLK-D-a0.5-seed0"
+    assert "regress_4way_adam.yaml" in (run / "config.yaml").read_text()
+    assert read_eval_json(run, TEST_EVALUATION)["evaluation"]["seed"] == TEST_SEED

@@ -433,3 +433,17 @@ def test_a_multirun_through_ray_runs_each_job_on_a_head_bound_to_127_0_0_1(tmp_p
     assert sorted(p.name for p in runs.iterdir() if (p / "metrics.csv").exists()) == ["s0", "s1"]
     for seed in (0, 1):
         assert OmegaConf.load(runs / f"s{seed}" / "config.yaml").seed == seed
+
+
+def test_a_map_file_run_is_named_after_its_file():
+    """Evaluations and exported policies name a map file's run by the file, not by the
+    default task the composition starts from."""
+    from crllk.training.compose import compose_config
+    from crllk.training.config import validate
+
+    path = str(Path(__file__).parent / "data/real_maps/duckietown-world/ETH_small_intersect.yaml")
+    config = validate(compose_config([f"task={path}"]))
+    assert config.task_name == "ETH_small_intersect"
+    assert str(config.task_source()) == path
+    assert config.default_run_dir().parent.name == "ETH_small_intersect"
+    assert validate(compose_config(["task=zigzag"])).task_name == "zigzag"

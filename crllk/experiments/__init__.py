@@ -6,6 +6,8 @@
     python -m crllk.experiments sweep     # fixed-weight PPO-D over a grid of weights, every map
     python -m crllk.experiments robustness  # CRLLK-D with and without randomisation, held out
     python -m crllk.experiments teacher   # CRLLK-D with the teacher's floor, annealed, none
+    python -m crllk.experiments aids      # CRLLK-D without encounter spawns, pixel critics
+    python -m crllk.experiments realmaps  # CRLLK-D on two real Duckietown maps nobody tuned on
     python -m crllk.experiments all       # table1, maps and figure1
 
 Every experiment trains its runs as trainer multiruns (``python -m crllk.train -m
@@ -37,7 +39,9 @@ from pathlib import Path
 from crllk.cli import Parser
 from crllk.errors import ConfigError
 from crllk.evaluation.robustness import conditions
+from crllk.experiments.aids import aids
 from crllk.experiments.figure1 import figure1_markdown
+from crllk.experiments.realmaps import realmaps
 from crllk.experiments.robustness import robustness
 from crllk.experiments.runs import (
     AGENTS,
@@ -110,7 +114,8 @@ def figure1(settings: Settings) -> list[Path]:
 
 
 EXPERIMENTS = {"table1": table1, "maps": maps, "figure1": figure1, "sweep": sweep,
-               "robustness": robustness, "teacher": teacher}
+               "robustness": robustness, "teacher": teacher, "aids": aids,
+               "realmaps": realmaps}
 ALL = ("table1", "maps", "figure1")
 """What ``all`` runs (the sweep is asked for by name)."""
 

@@ -71,10 +71,18 @@ class RunSpec:
     extra: tuple[str, ...] = ()
     tag: str = ""
     """Added to the run's directory name (fixed weights of a sweep run)."""
+    task_file: str = ""
+    """A task or Duckietown map file (path) to train on instead of the named ``task``."""
+
+    @property
+    def task_folder(self) -> str:
+        """The folder of the run's map under the runs root: the task's name, or the stem of
+        its ``task_file``."""
+        return Path(self.task_file).stem if self.task_file else self.task
 
     def directory(self, root: Path) -> Path:
-        return root / self.task / (f"{self.agent}{self.tag}-a{self.lane_threshold:g}"
-                                   f"-seed{self.seed}")
+        return root / self.task_folder / (f"{self.agent}{self.tag}-a{self.lane_threshold:g}"
+                                          f"-seed{self.seed}")
 
 
 @dataclass(frozen=True)
@@ -162,10 +170,12 @@ def sweep_commands(specs: Sequence[RunSpec], settings: Settings) -> list[list[st
     """The trainer multiruns (``python -m crllk.train -m``) that train ``specs``: runs that
     differ only in agent, map and seed are one sweep over ``agent``, ``task`` and ``seed``, its
     ``run_dir`` interpolating all three. Runs that are not every combination of those are split
-    into sweeps that are: by agent, then by agent and map."""
+    into sweeps that are: by agent, then by agent and map. Runs on a map file sweep apart, one
+    file each (``task_file=PATH``, its folder written out in ``run_dir``)."""
     groups: dict[tuple, list[RunSpec]] = {}
     for spec in specs:
-        groups.setdefault((spec.lane_threshold, spec.extra, spec.tag), []).append(spec)
+        key = (spec.lane_threshold, spec.extra, spec.tag, spec.task_file)
+        groups.setdefault(key, []).append(spec)
     return [_sweep_command(part, settings) for members in groups.values()
             for part in _products(members)]
 
@@ -194,12 +204,15 @@ def _sweep_command(specs: Sequence[RunSpec], settings: Settings) -> list[str]:
     def values(axis: str) -> str:
         return ",".join(str(v) for v in dict.fromkeys(getattr(s, axis) for s in specs))
 
+    # a map file leaves the composed task (and ${task.name}) the default one: its folder here
+    task, folder = ((f"task_file={spec.task_file}", spec.task_folder) if spec.task_file
+                    else (f"task={values('task')}", "${task.name}"))
     return [sys.executable, "-m", "crllk.train", "-m", f"agent={values('agent')}",
-            f"task={values('task')}", f"seed={values('seed')}", f"obs={settings.obs}",
+            task, f"seed={values('seed')}", f"obs={settings.obs}",
             f"algo.constraints.lane.threshold={spec.lane_threshold}",
             f"algo.constraints.collision.threshold={THRESHOLDS['collision']}",
             f"total_frames={settings.frames}",
-            f"run_dir={settings.runs_root}/${{task.name}}/{name}-seed${{seed}}",
+            f"run_dir={settings.runs_root}/{folder}/{name}-seed${{seed}}",
             "resume=true", "progress=false", "threads=1", "workers=1",
             f"hydra.launcher.n_jobs={settings.jobs}", *settings.train_overrides, *spec.extra]
 

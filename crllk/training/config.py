@@ -271,6 +271,9 @@ class TrainConfig:
 
     @property
     def task_name(self) -> str:
+        """The task's name: a task or map file's stem, else the composed ``task.name``."""
+        if self.task_file:
+            return Path(self.task_file).stem
         return str(self.task.get("name", "task"))
 
     @property
@@ -279,7 +282,7 @@ class TrainConfig:
 
     def task_source(self) -> str | Path:
         """What :func:`crllk.tasks.config.load_task_config` reads: the task file or name."""
-        return self.task_file if self.task_file else self.task_name
+        return self.task_file if self.task_file else str(self.task.get("name", "task"))
 
     def task_overrides(self) -> dict[str, Any]:
         """The task settings as composed (command-line changes included), without the map."""
@@ -288,7 +291,7 @@ class TrainConfig:
         return {k: v for k, v in self.task.items() if k not in ("name", "map")}
 
     def default_run_dir(self) -> Path:
-        stem = Path(self.task_file).stem if self.task_file else self.task_name
+        stem = self.task_name
         return Path.cwd() / "runs" / stem / (
             f"{self.algo.name}-{self.action.name}-{self.obs.name}-seed{self.seed}")
 
