@@ -157,3 +157,34 @@ def test_the_readme_quotes_what_the_teacher_s_floor_buys():
     assert (f"collides up to {round(100 * worst_mode('-noteacher'))} times in 100 validation "
             "episodes where the floor's collides at most once") in readme
     assert round(100 * worst_mode("")) == 1
+
+
+def test_the_readme_s_figure1_numbers_are_figure1_json():
+    """Each threshold's mean J_clane and J_R, its final λ_lane per seed and its mode's J_clane,
+    as the README quotes them."""
+    readme = " ".join((REPO / "README.md").read_text().split())
+    figure = json.loads((REPO / "results/pixels/figure1.json").read_text())
+    parts, modes = [], []
+    for threshold, entry in figure["thresholds"].items():
+        sampled, mode = entry["evaluations"], entry["mode_evaluations"]
+        lane = sum(e["J_clane"] for e in sampled) / len(sampled)
+        travel = sum(e["J_R"] for e in sampled) / len(sampled)
+        lambdas = " / ".join(f"{v:.2f}" for v in entry["final_lambda_lane"])
+        parts.append(f"{threshold} → {lane:.3f}, {travel:.2f}, {lambdas}")
+        modes.append(f"{sum(e['J_clane'] for e in mode) / len(mode):.3f}")
+    assert "; ".join(parts) + "." in readme
+    assert f"J_clane {', '.join(modes[:-1])} and {modes[-1]} dm" in readme
+
+
+def test_the_readme_s_distance_to_the_best_fixed_pair_is_the_sweep_s():
+    from crllk.experiments.figure1 import best_fixed_pair
+
+    figure = json.loads((REPO / "results/pixels/figure1.json").read_text())
+    sweep = json.loads((REPO / "results/pixels/sweep.json").read_text())
+    fixed = sweep["maps"]["small_loop"]["fixed"]
+    gaps = []
+    for threshold, entry in figure["thresholds"].items():
+        best = best_fixed_pair(fixed, float(threshold), sweep["thresholds"]["collision"])
+        travel = sum(e["J_R"] for e in entry["evaluations"]) / len(entry["evaluations"])
+        gaps.append(abs(travel - best["J_R"]["mean"]))
+    assert f"within {max(gaps) + 0.005:.2f} m" in (REPO / "README.md").read_text()
