@@ -21,7 +21,7 @@ LAYERS = (
     ("crllk.envs", "crllk.gym"),
     ("crllk.rl",),
     ("crllk.recording",),
-    ("crllk.training",),
+    ("crllk.training", "crllk.algos"),
     ("crllk.evaluation",),
     ("crllk.analysis", "crllk.deployment"),
     ("crllk.train", "crllk.evaluate", "crllk.record", "crllk.experiments", "crllk.pictures",

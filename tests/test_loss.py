@@ -1,4 +1,5 @@
-"""Numeric and key-remap tests of the Lagrangian PPO loss and its GAE helper."""
+"""Numeric and key-remap tests of the PPO loss with its critics, its GAE helper, and the loss fed
+by the λ-combination (:mod:`crllk.rl.lagrangian_advantage`)."""
 
 from __future__ import annotations
 
@@ -15,7 +16,8 @@ from torch.distributions import Categorical
 from torchrl.modules import MLP, ProbabilisticActor, TanhNormal, ValueOperator
 from torchrl.objectives import ClipPPOLoss
 
-from crllk.rl.loss import LagrangianPPOLoss, make_advantage_modules
+from crllk.rl.lagrangian_advantage import LagrangianAdvantage
+from crllk.rl.loss import CriticsPPOLoss, make_advantage_modules
 
 _OBS_DIM = 4
 _N_ACTIONS = 3
@@ -70,14 +72,15 @@ def _networks(actor_factory=_categorical_actor, seed: int = 0):
 
 def _batch(actor: ProbabilisticActor, actions: torch.Tensor, g: torch.Generator) -> TensorDict:
     """A batch of 32 transitions: the actor's log-probs perturbed so that some ratios clip,
-    random advantages and value targets for the reward and both costs."""
+    random advantages and value targets for the reward and both costs (the reward's advantage
+    in ``advantage_reward``, before the λ-combination)."""
     td = TensorDict({"observation": torch.randn(_BATCH, _OBS_DIM, generator=g)}, [_BATCH])
     td["action"] = actions
     with torch.no_grad():
         log_prob = actor.get_dist(td).log_prob(actions)
     td["action_log_prob"] = log_prob + 0.3 * torch.randn(_BATCH, generator=g)
     for suffix in ("", *(f"_{name}" for name in _COSTS)):
-        td[f"advantage{suffix}"] = torch.randn(_BATCH, 1, generator=g)
+        td[f"advantage{suffix or '_reward'}"] = torch.randn(_BATCH, 1, generator=g)
         td[f"value_target{suffix}"] = torch.randn(_BATCH, 1, generator=g)
     return td
 
@@ -87,10 +90,11 @@ def _categorical_batch(actor: ProbabilisticActor, seed: int = 1) -> TensorDict:
     return _batch(actor, torch.randint(0, _N_ACTIONS, (_BATCH,), generator=g), g)
 
 
-def _loss(lagrange=(0.0, 0.0), **kwargs) -> tuple[LagrangianPPOLoss, TensorDict]:
+def _loss(lagrange=(0.0, 0.0), **kwargs) -> tuple[CriticsPPOLoss, TensorDict]:
+    """The loss and a batch whose advantage the λ-combination wrote with ``lagrange``."""
     actor, critic, cost_critics = _networks()
-    loss = LagrangianPPOLoss(actor, critic, cost_critics, lagrange=lagrange, **kwargs)
-    return loss, _categorical_batch(actor)
+    loss = CriticsPPOLoss(actor, critic, cost_critics, **kwargs)
+    return loss, LagrangianAdvantage(_COSTS, lagrange=lagrange)(_categorical_batch(actor))
 
 
 # ---------------------------------------------------------------------- (a) λ = 0 is PPO
@@ -124,14 +128,14 @@ def test_input_batch_is_not_modified():
 # ------------------------------------------------------- (b) λ lowers the objective as computed
 
 
-def _unit_ratio_batch(loss: LagrangianPPOLoss) -> TensorDict:
+def _unit_ratio_batch(loss: CriticsPPOLoss) -> TensorDict:
     """A_r = 1 everywhere; A_lane = 3 on the first half, 0 on the second; A_collision = 0.5.
     The stored log-probs are the current ones, so every ratio ρ is exactly 1."""
     td = _categorical_batch(loss.actor_network)
     with torch.no_grad():
         td["action_log_prob"] = loss.actor_network.get_dist(td).log_prob(td["action"])
     half = _BATCH // 2
-    td["advantage"] = torch.ones(_BATCH, 1)
+    td["advantage_reward"] = torch.ones(_BATCH, 1)
     td["advantage_lane"] = torch.cat([torch.full((half, 1), 3.0), torch.zeros(half, 1)])
     td["advantage_collision"] = torch.full((_BATCH, 1), 0.5)
     return td
@@ -147,11 +151,11 @@ def _unit_ratio_batch(loss: LagrangianPPOLoss) -> TensorDict:
     ],
 )
 def test_combined_advantage_follows_the_formula(lagrange, high_cost, no_cost):
-    loss, _ = _loss(lagrange=lagrange)
-    td = _unit_ratio_batch(loss)
+    loss, _ = _loss()
+    td = LagrangianAdvantage(_COSTS, lagrange=lagrange)(_unit_ratio_batch(loss))
     half = _BATCH // 2
     expected = torch.tensor([[high_cost]] * half + [[no_cost]] * half)
-    torch.testing.assert_close(loss.combined_advantage(td), expected)
+    torch.testing.assert_close(td["advantage"], expected)
     # With ρ = 1 no sample is clipped and the surrogate is mean(ρ·A) = mean(A):
     out = loss(td)
     assert out["clip_fraction"] == 0.0
@@ -165,10 +169,11 @@ def test_a_larger_lane_multiplier_lowers_the_objective():
     # whose advantage turns from +1 to −5/3 (their actions become less likely).
     loss, _ = _loss()
     td = _unit_ratio_batch(loss)
+    combination = LagrangianAdvantage(_COSTS)
     objectives = []
     for lane in (0.0, 0.5, 2.0, 10.0):
-        loss.set_multipliers({"lane": lane, "collision": 0.0})
-        objectives.append(loss(td)["loss_objective"].item())
+        combination.set_multipliers({"lane": lane, "collision": 0.0})
+        objectives.append(loss(combination(td))["loss_objective"].item())
     assert objectives[0] == pytest.approx(-1.0)
     assert objectives[2] == pytest.approx(2.0 / 3.0)
     assert objectives == sorted(objectives)  # the loss rises (objective falls) with λ_lane
@@ -216,14 +221,14 @@ def test_set_keys_remaps_what_the_loss_reads():
     loss, td = _loss(lagrange=(2.0, 1.0))
     expected = loss(td)
     renamed = td.clone()
-    renamed["adv_reward"] = renamed.pop("advantage")
-    renamed["costs", "lane", "advantage"] = renamed.pop("advantage_lane")
-    loss.set_keys(advantage="adv_reward", advantage_lane=("costs", "lane", "advantage"))
-    assert loss.cost_keys("lane")[0] == ("costs", "lane", "advantage")
+    renamed["adv"] = renamed.pop("advantage")
+    renamed["costs", "lane", "target"] = renamed.pop("value_target_lane")
+    loss.set_keys(advantage="adv", value_target_lane=("costs", "lane", "target"))
+    assert loss.cost_keys("lane")[0] == ("costs", "lane", "target")
     out = loss(renamed)
     for key in _LOSS_KEYS:
         torch.testing.assert_close(out[key], expected[key], msg=key)
-    with pytest.raises(KeyError, match="adv_reward"):
+    with pytest.raises(KeyError, match="'adv'"):
         loss(td)  # the old names are no longer read
 
 
@@ -233,20 +238,7 @@ def test_unknown_key_names_and_shared_value_keys_raise():
         loss.set_keys(advantage_speed="advantage_speed")
     actor, critic, _ = _networks()
     with pytest.raises(ValueError, match="its own value key"):
-        LagrangianPPOLoss(actor, critic, {"lane": _critic("state_value")})
-
-
-def test_set_multipliers_validates():
-    loss, _ = _loss()
-    loss.set_multipliers(torch.tensor([0.5, 4.0]))
-    assert loss.multipliers == {"lane": 0.5, "collision": 4.0}
-    assert torch.equal(loss.state_dict()["lagrange"], torch.tensor([0.5, 4.0]))
-    with pytest.raises(ValueError, match="expected 2 multipliers"):
-        loss.set_multipliers([1.0])
-    with pytest.raises(ValueError, match="finite and >= 0"):
-        loss.set_multipliers([1.0, -0.1])
-    with pytest.raises(ValueError, match="must name"):
-        loss.set_multipliers({"lane": 1.0})
+        CriticsPPOLoss(actor, critic, {"lane": _critic("state_value")})
 
 
 # ---------------------------------------------------------------------- (e) the GAE helper
@@ -309,13 +301,13 @@ def test_gae_helper_matches_a_manual_computation():
     torch.testing.assert_close(td["advantage_collision"], torch.zeros(5, 1))
     # Reward: V(s) = 2s, r = 1: δ_4 = 1 − 0.4 = 0.6, δ_3 = 1 + 0.95·0.4 − 0.8 = 0.58
     #   A_4 = 0.6, A_3 = 0.58 + 0.9025·0.6 = 1.1215
-    torch.testing.assert_close(td["advantage"][3:], torch.tensor([[1.1215], [0.6]]))
+    torch.testing.assert_close(td["advantage_reward"][3:], torch.tensor([[1.1215], [0.6]]))
 
 
 def test_gae_helper_feeds_the_loss_with_renamed_keys():
     actor, critic, cost_critics = _networks()
-    loss = LagrangianPPOLoss(actor, critic, cost_critics, lagrange=(1.0, 1.0))
-    loss.set_keys(advantage_lane="adv_lane", value_target_collision="ret_collision")
+    loss = CriticsPPOLoss(actor, critic, cost_critics)
+    loss.set_keys(value_target_lane="ret_lane", value_target_collision="ret_collision")
     modules = make_advantage_modules(0.95, 0.95, critic, cost_critics, loss=loss)
     g = torch.Generator().manual_seed(3)
     shape = (2, 5)  # two environments, five steps
@@ -338,8 +330,8 @@ def test_gae_helper_feeds_the_loss_with_renamed_keys():
     with torch.no_grad():
         td["action_log_prob"] = actor.get_dist(td).log_prob(td["action"])
     modules(td)
-    assert {"adv_lane", "ret_collision"} <= set(td.keys())
-    out = loss(td)
+    assert {"advantage_reward", "advantage_lane", "ret_lane", "ret_collision"} <= set(td.keys())
+    out = loss(LagrangianAdvantage(_COSTS, lagrange=(1.0, 1.0))(td))
     assert all(torch.isfinite(out[key]) for key in _LOSS_KEYS)
 
 
@@ -348,10 +340,10 @@ def test_gae_helper_feeds_the_loss_with_renamed_keys():
 
 def test_continuous_actions_give_finite_losses():
     actor, critic, cost_critics = _networks(lambda: _tanh_normal_actor(action_dim=2))
-    loss = LagrangianPPOLoss(actor, critic, cost_critics, lagrange=(1.0, 4.0))
+    loss = CriticsPPOLoss(actor, critic, cost_critics)
     g = torch.Generator().manual_seed(2)
     actions = torch.rand(_BATCH, 2, generator=g) * 1.8 - 0.9  # inside (−1, 1)
-    td = _batch(actor, actions, g)
+    td = LagrangianAdvantage(_COSTS, lagrange=(1.0, 4.0))(_batch(actor, actions, g))
     with _seeded(0):  # TanhNormal has no analytic entropy: a one-sample estimate
         out = loss(td)
     for key, value in out.items():
@@ -383,8 +375,8 @@ def test_imitation_term_worked_example():
                                in_keys=["logits"], distribution_class=Categorical,
                                return_log_prob=True)
     _, critic, cost_critics = _networks()
-    loss = LagrangianPPOLoss(actor, critic, cost_critics)
-    td = _categorical_batch(_networks()[0])[:4]
+    loss = CriticsPPOLoss(actor, critic, cost_critics)
+    td = LagrangianAdvantage(_COSTS)(_categorical_batch(_networks()[0])[:4])
     td["action_log_prob"] = actor.get_dist(td).log_prob(td["action"])
     td["teacher_action"] = torch.tensor([0, 2, 2, 1])
     loss.set_imitation_coeff(0.5)
@@ -417,9 +409,9 @@ def test_continuous_imitation_trains_the_mean_only():
                                in_keys=["loc", "scale"], distribution_class=TanhNormal,
                                return_log_prob=True)
     _, critic, cost_critics = _networks()
-    loss = LagrangianPPOLoss(actor, critic, cost_critics)
+    loss = CriticsPPOLoss(actor, critic, cost_critics)
     g = torch.Generator().manual_seed(0)
-    td = _batch(actor, torch.zeros(_BATCH, 2), g)
+    td = LagrangianAdvantage(_COSTS)(_batch(actor, torch.zeros(_BATCH, 2), g))
     td["teacher_action"] = torch.full((_BATCH, 2), math.tanh(1.0))
     loss.set_imitation_coeff(0.5)
     term = loss(td)["loss_imitation"]
@@ -438,10 +430,10 @@ def test_imitation_pulls_the_policy_towards_the_teacher():
                              (lambda: _tanh_normal_actor(2),
                               torch.tensor([1.0, -0.5]).expand(_BATCH, 2))):
         actor, critic, cost_critics = _networks(factory)
-        loss = LagrangianPPOLoss(actor, critic, cost_critics)
+        loss = CriticsPPOLoss(actor, critic, cost_critics)
         g = torch.Generator().manual_seed(3)
         actions = teacher if factory is _categorical_actor else torch.zeros(_BATCH, 2)
-        td = _batch(actor, actions, g)
+        td = LagrangianAdvantage(_COSTS)(_batch(actor, actions, g))
         td["teacher_action"] = teacher
         loss.set_imitation_coeff(1.0)
         optimizer = torch.optim.Adam(actor.parameters(), lr=1e-2)

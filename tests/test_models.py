@@ -73,12 +73,12 @@ def test_shared_critic_writes_one_value_per_head_from_one_encoder():
 
 
 def test_loss_runs_a_shared_critic_once_per_batch():
-    from crllk.rl.loss import LagrangianPPOLoss
+    from crllk.rl.loss import CriticsPPOLoss
 
     keys = ["state_value", "state_value_lane", "state_value_collision"]
     critic = make_shared_critic("state", (4,), ModelConfig(), keys)
     actor = make_actor("state", (4,), "discrete", Categorical(3), ModelConfig())
-    loss = LagrangianPPOLoss(actor, critic, {"lane": critic, "collision": critic})
+    loss = CriticsPPOLoss(actor, critic, {"lane": critic, "collision": critic})
     calls = []
     critic.module.encoder.register_forward_hook(lambda *args: calls.append(1))
     n = 8

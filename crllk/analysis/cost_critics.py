@@ -31,6 +31,7 @@ def cost_critic_fit(run_dir: Path, batches: int, constraint: str) -> dict[str, A
     """The fit of ``constraint``'s cost critic over ``batches`` freshly collected batches."""
     import torch
 
+    from crllk.algos.ppo_lagrangian import PPOLagrangian
     from crllk.envs.episodes import EpisodeAccumulator
     from crllk.rl.loss import explained_variance
     from crllk.training.build import build_run
@@ -52,8 +53,11 @@ def cost_critic_fit(run_dir: Path, batches: int, constraint: str) -> dict[str, A
                               f"{constraint!r} is not a constraint of the run ({names})")
         restore(load_checkpoint(checkpoint, resuming=True), learner, multipliers,
                 EpisodeAccumulator(config.num_envs, env.constraints), env, generator)
+        if not isinstance(learner, PPOLagrangian):
+            raise ConfigError(SOURCE, "run", f"the run's learner {learner.name!r} has no GAE "
+                              "cost critics to analyse")
         cost_key = env.constraints[names.index(constraint)].cost_key
-        _, target_key, value_key = learner.loss.cost_keys(constraint)
+        target_key, value_key = learner.loss.cost_keys(constraint)
         carry = first_carry(env)
         targets, values, costs = [], [], []
         with torch.no_grad():
@@ -63,7 +67,7 @@ def cost_critic_fit(run_dir: Path, batches: int, constraint: str) -> dict[str, A
                 shape_signals(batch, config, env.config)
                 learner.advantages(batch)
                 flat = batch.reshape(-1)
-                learner.loss._evaluate_critics(flat)
+                learner.loss.evaluate_critics(flat)
                 targets.append(flat.get(target_key).reshape(-1))
                 values.append(flat.get(value_key).reshape(-1))
                 costs.append(flat["next", cost_key].reshape(-1))

@@ -26,7 +26,7 @@ from crllk.training.build import build_run
 from crllk.training.compose import compose_config
 from crllk.training.config import TrainConfig, validate
 from crllk.training.loop import collect_batch, first_carry, learn
-from crllk.training.updates import ppo_update, shape_signals
+from crllk.training.updates import shape_signals
 
 
 @dataclass(frozen=True)
@@ -97,7 +97,7 @@ class CollectionRates:
     """One stochastic policy forward pass on a batch of ``num_envs`` observations in this
     process (ms)."""
     update_s: float
-    """The PPO update of one collected batch: GAE and the epochs (s)."""
+    """The learner's update on one collected batch (PPO-Lagrangian: GAE and the epochs) (s)."""
 
 
 def collection_rates(config: TrainConfig, iterations: int = 3) -> CollectionRates:
@@ -115,7 +115,7 @@ def collection_rates(config: TrainConfig, iterations: int = 3) -> CollectionRate
         collecting = (time.perf_counter() - start) / iterations
         shape_signals(batch, config, env.config)
         start = time.perf_counter()
-        ppo_update(learner, batch, config, generator)
+        learner.update(batch, generator)
         update_s = time.perf_counter() - start
 
         episodes = EpisodeAccumulator(config.num_envs, env.constraints)

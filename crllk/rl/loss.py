@@ -1,23 +1,15 @@
-"""Lagrangian PPO: the PPO clip loss on an advantage that combines a reward and cost critics.
+"""The PPO clip loss of a policy whose advantage comes combined, with a value loss per critic.
 
-For costs C_1..C_n with multipliers λ_i >= 0 the policy maximises the Lagrangian
-J_R − Σ_i λ_i J_Ci. Its advantage is combined from one GAE per signal and normalised::
-
-    A = (A_r − Σ_i λ_i A_ci) / (1 + Σ_i λ_i)
-
-Dividing by 1 + Σλ keeps the advantage (and so the step size) of the same order however large λ
-grows, when advantages are used as they are; the direction is that of the penalised reward
-r − Σ λ_i c_i. With ``normalize_advantage`` (the trainer's default) the combined advantage is
-standardised per minibatch, which undoes any positive scale: the division then changes nothing,
-and the multipliers alone set the balance between reward and costs. Advantages are computed
-outside the loss, by the GAE modules of :func:`make_advantage_modules`; the multipliers are
-updated outside it too (:mod:`crllk.rl.lagrange`) and handed over with :meth:`set_multipliers`.
+The loss reads a ready advantage (for constrained learning the λ-combination of
+:mod:`crllk.rl.lagrangian_advantage` writes it), optionally standardises it per minibatch, and
+adds one value loss for the reward critic and one per cost critic, and an imitation term. The
+advantages and value targets come from the GAE modules of :func:`make_advantage_modules`.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -31,6 +23,8 @@ from torchrl.modules import ProbabilisticActor, TanhNormal
 from torchrl.objectives import LossModule
 from torchrl.objectives.value import GAE
 
+from crllk.rl.lagrangian_advantage import REWARD_ADVANTAGE, check_cost_names, cost_advantage_key
+
 _ADVANTAGE_STD_EPS = 1e-6  # floor of the advantage std when standardising (advantage units)
 _TEACHER_MARGIN = 1e-3  # continuous teacher actions are clamped this far inside [-1, 1]
 
@@ -43,17 +37,16 @@ def cost_reward_key(name: str) -> str:
 def _cost_key_defaults(name: str) -> dict[str, str]:
     """Accepted-key field name -> default tensordict key, for one cost."""
     return {
-        f"advantage_{name}": f"advantage_{name}",
         f"value_target_{name}": f"value_target_{name}",
         f"value_{name}": f"state_value_{name}",
     }
 
 
-class LagrangianPPOLoss(LossModule):
-    """PPO clip loss on the λ-combined advantage, with a value loss for every critic.
+class CriticsPPOLoss(LossModule):
+    """PPO clip loss on a given advantage, with a value loss for every critic.
 
-    Per sample, with ratio ρ = π_θ(a|s) / π_old(a|s) and the combined advantage A above
-    (optionally standardised over the batch when ``normalize_advantage``)::
+    Per sample, with ratio ρ = π_θ(a|s) / π_old(a|s) and the advantage A read from the batch
+    (optionally standardised over the minibatch when ``normalize_advantage``)::
 
         loss_objective   = −mean(min(ρ·A, clip(ρ, 1−ε, 1+ε)·A))
         loss_critic      = c_v · mean((V_r(s) − G_r)²)
@@ -63,33 +56,36 @@ class LagrangianPPOLoss(LossModule):
 
 The imitation term pulls the policy towards a teacher's action ``teacher_action`` recorded for
 each state (:mod:`crllk.tasks.teacher`); its weight c_I (``imitation_coeff``, settable between
-updates like the multipliers) is 0 by default, and then the term is 0 and needs no teacher key.
-For a tanh-Gaussian policy the term moves only the mean: the scale enters it detached, because a
-scripted teacher says what to do, not how sure the policy should be, and its corrections at the
-edge of the box (atanh of nearly ±1) would otherwise inflate the policy's noise.
+updates) is 0 by default, and then the term is 0 and needs no teacher key. For a tanh-Gaussian
+policy the term moves only the mean: the scale enters it detached, because a scripted teacher
+says what to do, not how sure the policy should be, and its corrections at the edge of the box
+(atanh of nearly ±1) would otherwise inflate the policy's noise.
 
-    The sum of the ``loss_*`` entries is the quantity to minimise. Diagnostics (detached):
-    ``entropy``, ``kl_approx`` = mean((ρ − 1) − log ρ) (the non-negative "k3" estimator, where
-    TorchRL's ``ClipPPOLoss`` reports mean(−log ρ)), ``clip_fraction``, ``explained_variance``
-    and ``explained_variance_<cost>``. With all λ = 0 the objective and entropy terms equal
-    TorchRL's ``ClipPPOLoss`` on the same data.
+    The sum of the ``loss_*`` entries is the quantity to minimise (:attr:`loss_names`).
+    Diagnostics (detached): ``entropy``, ``kl_approx`` = mean((ρ − 1) − log ρ) (the
+    non-negative "k3" estimator, where TorchRL's ``ClipPPOLoss`` reports mean(−log ρ)),
+    ``clip_fraction``, ``explained_variance`` and ``explained_variance_<cost>``. The objective
+    and entropy terms equal TorchRL's ``ClipPPOLoss`` on the same data.
 
     Keys (see ``set_keys``): ``advantage``, ``value_target``, ``value``, ``sample_log_prob``,
-    ``action``, and per cost ``advantage_<cost>``, ``value_target_<cost>``, ``value_<cost>``
-    (defaults ``"advantage_<cost>"``, ``"value_target_<cost>"``, the critic's output key). A
-    value entry may have the batch shape or the batch shape plus a trailing 1.
+    ``action``, and per cost ``value_target_<cost>``, ``value_<cost>`` (defaults
+    ``"value_target_<cost>"``, the critic's output key). A value entry may have the batch shape
+    or the batch shape plus a trailing 1.
 
     Args:
         actor_network: A single-head probabilistic actor (``get_dist`` on a tensordict).
         critic_network: Reward critic writing one value key.
-        cost_critics: One critic per cost, by cost name (an identifier); the order fixes the
-            order of ``lagrange``. Every critic must write its own value key.
+        cost_critics: One critic per cost, by cost name (an identifier). Every critic must
+            write its own value key.
         clip_epsilon: ε of the ratio clip.
         entropy_coeff: c_H.
         critic_coeff: c_v, shared by reward and cost critics.
-        normalize_advantage: standardise the combined advantage over the batch.
-        lagrange: initial multipliers λ (zeros by default).
+        normalize_advantage: standardise the advantage over the minibatch.
     """
+
+    loss_names = ("loss_objective", "loss_critic", "loss_cost_critic", "loss_entropy",
+                  "loss_imitation")
+    """The terms whose sum is minimised."""
 
     @dataclass
     class _AcceptedKeys:
@@ -121,10 +117,9 @@ edge of the box (atanh of nearly ±1) would otherwise inflate the policy's noise
         entropy_coeff: float = 0.01,
         critic_coeff: float = 1.0,
         normalize_advantage: bool = False,
-        lagrange: Sequence[float] | None = None,
     ) -> None:
         super().__init__()
-        self.cost_names: tuple[str, ...] = _check_cost_names(tuple(cost_critics))
+        self.cost_names: tuple[str, ...] = check_cost_names(tuple(cost_critics))
         self.actor_network = actor_network
         self.critic_network = critic_network
         self.cost_critics = nn.ModuleDict(dict(cost_critics))
@@ -136,9 +131,6 @@ edge of the box (atanh of nearly ±1) would otherwise inflate the policy's noise
         self.register_coeff_buffer("critic_coeff", critic_coeff)
         self.register_coeff_buffer("imitation_coeff", 0.0)
         self.normalize_advantage = normalize_advantage
-        self.register_buffer("lagrange", torch.zeros(len(self.cost_names)))
-        if lagrange is not None:
-            self.set_multipliers(lagrange)
 
     @property
     def functional(self) -> bool:
@@ -174,7 +166,7 @@ edge of the box (atanh of nearly ±1) would otherwise inflate the policy's noise
             out_keys = getattr(critic, "out_keys", [])
             if len(out_keys) == 1:
                 self.set_keys(**{field_name: out_keys[0]})
-        value_keys = [self.tensor_keys.value, *(self.cost_keys(n)[2] for n in self.cost_names)]
+        value_keys = [self.tensor_keys.value, *(self.cost_keys(n)[1] for n in self.cost_names)]
         if len(set(value_keys)) != len(value_keys):
             raise ValueError(
                 f"every critic must write its own value key, got {value_keys}; e.g. "
@@ -184,10 +176,10 @@ edge of the box (atanh of nearly ±1) would otherwise inflate the policy's noise
     def _forward_value_estimator_keys(self, **kwargs: Any) -> None:
         """No value estimator lives inside this loss; advantages come precomputed."""
 
-    def cost_keys(self, name: str) -> tuple[NestedKey, NestedKey, NestedKey]:
-        """(advantage, value target, value) keys of cost ``name``."""
+    def cost_keys(self, name: str) -> tuple[NestedKey, NestedKey]:
+        """(value target, value) keys of cost ``name``."""
         keys = self._cost_tensor_keys
-        return keys[f"advantage_{name}"], keys[f"value_target_{name}"], keys[f"value_{name}"]
+        return keys[f"value_target_{name}"], keys[f"value_{name}"]
 
     @property
     def in_keys(self) -> list[NestedKey]:
@@ -197,68 +189,34 @@ edge of the box (atanh of nearly ±1) would otherwise inflate the policy's noise
         k = self.tensor_keys
         keys += [k.action, k.sample_log_prob, k.advantage, k.value_target]
         for name in self.cost_names:
-            keys += self.cost_keys(name)[:2]
+            keys.append(self.cost_keys(name)[0])
         return list(dict.fromkeys(keys))
 
     @property
     def out_keys(self) -> list[str]:
-        names = ["loss_objective", "loss_critic", "loss_cost_critic", "loss_entropy",
-                 "loss_imitation"]
-        names += ["entropy", "kl_approx", "clip_fraction", "explained_variance"]
+        names = [*self.loss_names, "entropy", "kl_approx", "clip_fraction", "explained_variance"]
         return names + [f"explained_variance_{name}" for name in self.cost_names]
-
-    # ---------------------------------------------------------- multipliers
-
-    def set_multipliers(self, values: Sequence[float] | Mapping[str, float] | torch.Tensor) -> None:
-        """Copies λ into the ``lagrange`` buffer (in ``cost_names`` order, or by name).
-
-        Raises:
-            ValueError: on a wrong number of values, unknown names or negative / non-finite λ.
-        """
-        if isinstance(values, Mapping):
-            if set(values) != set(self.cost_names):
-                raise ValueError(f"multipliers must name {self.cost_names}, got {sorted(values)}")
-            values = [values[name] for name in self.cost_names]
-        tensor = torch.as_tensor(values, dtype=self.lagrange.dtype).reshape(-1)
-        if tensor.numel() != len(self.cost_names):
-            raise ValueError(
-                f"expected {len(self.cost_names)} multipliers {self.cost_names}, "
-                f"got {tensor.numel()}"
-            )
-        if not torch.isfinite(tensor).all() or (tensor < 0).any():
-            raise ValueError(f"multipliers must be finite and >= 0, got {tensor.tolist()}")
-        self.lagrange.copy_(tensor)
-
-    @property
-    def multipliers(self) -> dict[str, float]:
-        """Current λ by cost name."""
-        return dict(zip(self.cost_names, self.lagrange.tolist(), strict=True))
 
     # ------------------------------------------------------------ the loss
 
-    def combined_advantage(self, tensordict: TensorDictBase) -> torch.Tensor:
-        """A = (A_r − Σ_i λ_i A_ci) / (1 + Σ_i λ_i), standardised if asked; shape [*B, 1]."""
-        batch_shape = tensordict.batch_size
-        advantage = _column(_get(tensordict, self.tensor_keys.advantage), batch_shape)
-        penalty = torch.zeros_like(advantage)
-        for weight, name in zip(self.lagrange, self.cost_names, strict=True):
-            cost_key = self.cost_keys(name)[0]
-            penalty = penalty + weight * _column(_get(tensordict, cost_key), batch_shape)
-        combined = ((advantage - penalty) / (1.0 + self.lagrange.sum())).detach()
-        if self.normalize_advantage and combined.numel() > 1:
-            combined = (combined - combined.mean()) / combined.std().clamp_min(
+    def advantage(self, tensordict: TensorDictBase) -> torch.Tensor:
+        """The batch's advantage, standardised if asked; shape [*B, 1]."""
+        advantage = _column(_get(tensordict, self.tensor_keys.advantage),
+                            tensordict.batch_size).detach()
+        if self.normalize_advantage and advantage.numel() > 1:
+            advantage = (advantage - advantage.mean()) / advantage.std().clamp_min(
                 _ADVANTAGE_STD_EPS
             )
-        return combined
+        return advantage
 
     def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
         """Computes the losses and diagnostics on a batch of transitions (see class docs)."""
         td = tensordict.clone(False)  # the networks write their outputs here, not in the input
-        advantage = self.combined_advantage(td)
+        advantage = self.advantage(td)
         log_ratio, dist = self._log_ratio(td)
         loss_objective, clip_fraction = self._clip_objective(log_ratio, advantage)
         entropy = _entropy(dist)
-        self._evaluate_critics(td)
+        self.evaluate_critics(td)
         loss_critic, explained = self._value_loss(
             td, self.tensor_keys.value, self.tensor_keys.value_target
         )
@@ -274,7 +232,7 @@ edge of the box (atanh of nearly ±1) would otherwise inflate the policy's noise
             "explained_variance": explained,
         }
         for name in self.cost_names:
-            _, target_key, value_key = self.cost_keys(name)
+            target_key, value_key = self.cost_keys(name)
             loss, explained = self._value_loss(td, value_key, target_key)
             out["loss_cost_critic"] = out["loss_cost_critic"] + loss
             out[f"explained_variance_{name}"] = explained
@@ -319,7 +277,7 @@ edge of the box (atanh of nearly ±1) would otherwise inflate the policy's noise
         clip_fraction = (clipped != log_ratio).to(log_ratio.dtype).mean().detach()
         return -gain.mean(), clip_fraction
 
-    def _evaluate_critics(self, td: TensorDictBase) -> None:
+    def evaluate_critics(self, td: TensorDictBase) -> None:
         """Runs every distinct critic once on ``td``; one network with several value heads
         (shared by the reward and the costs) runs only once."""
         seen: set[int] = set()
@@ -384,13 +342,6 @@ def _non_negative(name: str, value: float) -> float:
     return value
 
 
-def _check_cost_names(names: tuple[str, ...]) -> tuple[str, ...]:
-    for name in names:
-        if not (isinstance(name, str) and name.isidentifier()):
-            raise ValueError(f"cost names must be Python identifiers, got {name!r}")
-    return names
-
-
 @dataclass(frozen=True)
 class AdvantageModules:
     """One TorchRL ``GAE`` for the reward and one per cost; calling it runs them all."""
@@ -413,10 +364,12 @@ def make_advantage_modules(
     critic_network: TensorDictModule,
     cost_critics: Mapping[str, TensorDictModule],
     *,
-    loss: LagrangianPPOLoss | None = None,
+    loss: CriticsPPOLoss | None = None,
     average_gae: bool = False,
 ) -> AdvantageModules:
-    """GAE(γ, λ_GAE) for the reward and for each cost, writing the keys the loss reads.
+    """GAE(γ, λ_GAE) for the reward and for each cost: the value targets the loss reads, and
+    the advantages the λ-combination reads (:mod:`crllk.rl.lagrangian_advantage`: the reward's
+    in ``advantage_reward``, each cost's in ``advantage_<cost>``).
 
     Per signal x (reward, or cost c_i read from ``("next", "cost_<name>")``)::
 
@@ -434,22 +387,22 @@ def make_advantage_modules(
     """
     if not (0.0 <= gamma <= 1.0 and 0.0 <= lmbda <= 1.0) or math.isnan(gamma + lmbda):
         raise ValueError(f"gamma and lmbda must lie in [0, 1], got {gamma}, {lmbda}")
-    names = _check_cost_names(tuple(cost_critics))
+    names = check_cost_names(tuple(cost_critics))
     reward = GAE(gamma=gamma, lmbda=lmbda, value_network=critic_network, average_gae=average_gae)
     keys = None if loss is None else loss.tensor_keys
     reward.set_keys(
         value=critic_network.out_keys[0] if keys is None else keys.value,
-        advantage="advantage" if keys is None else keys.advantage,
+        advantage=REWARD_ADVANTAGE,
         value_target="value_target" if keys is None else keys.value_target,
     )
     costs = {}
     for name in names:
         critic = cost_critics[name]
+        advantage = cost_advantage_key(name)
         if loss is None:
-            advantage, target = f"advantage_{name}", f"value_target_{name}"
-            value = critic.out_keys[0]
+            target, value = f"value_target_{name}", critic.out_keys[0]
         else:
-            advantage, target, value = loss.cost_keys(name)
+            target, value = loss.cost_keys(name)
         module = GAE(gamma=gamma, lmbda=lmbda, value_network=critic, average_gae=average_gae)
         module.set_keys(
             reward=cost_reward_key(name), value=value, advantage=advantage, value_target=target

@@ -1,39 +1,23 @@
-"""The parts of a run: its environments, networks, loss, optimiser and multipliers."""
+"""The parts of a run: its environments, its learner (:mod:`crllk.algos`) and multipliers."""
 
 from __future__ import annotations
 
 import importlib.util
 from collections.abc import Sequence
-from dataclasses import dataclass
 
 import torch
 
 import crllk  # noqa: F401  (chooses the headless GL backend before torchrl imports mujoco)
+from crllk.algos import Learner, build_learner
+from crllk.algos.base import TrainingEnv
 from crllk.envs.batched import BatchedLaneKeepingEnv, make_env, sub_env_seeds
 from crllk.envs.distributed import RayClusterError, RayLaneKeepingCollector
 from crllk.envs.parallel import LaneKeepingEnv, ParallelLaneKeepingEnv
 from crllk.errors import ConfigError
 from crllk.rl.import_probes import settle_import_probes
 from crllk.rl.lagrange import Multiplier, make_multiplier
-from crllk.rl.loss import AdvantageModules, LagrangianPPOLoss, make_advantage_modules
-from crllk.rl.models import make_actor, make_critic, make_shared_critic
-from crllk.rl.sampling import ActionNoise
 from crllk.tasks.constraints import Constraint
-from crllk.tasks.lane_keeping import state_feature_names
 from crllk.training.config import CLUSTER_EXTRA, SOURCE, TrainConfig
-
-
-@dataclass
-class Learner:
-    """The networks, the loss and the optimiser of one run."""
-
-    actor: torch.nn.Module
-    critics: dict[str, torch.nn.Module]  # "reward" and one per cost
-    loss: LagrangianPPOLoss
-    advantages: AdvantageModules
-    optimizer: torch.optim.Optimizer
-    action_noise: ActionNoise
-    """Each training simulation's stream of action samples (:mod:`crllk.rl.sampling`)."""
 
 
 def build_env(config: TrainConfig, *, num_envs: int, seed: int,
@@ -53,11 +37,6 @@ def build_env(config: TrainConfig, *, num_envs: int, seed: int,
                     teacher_margin=config.teacher.margin,
                     commands=config.model.policy_commands, history=config.obs.history,
                     history_stride=config.obs.history_stride)
-
-
-TrainingEnv = BatchedLaneKeepingEnv | ParallelLaneKeepingEnv | RayLaneKeepingCollector
-"""What a run collects from: one process (``workers=1``), several, or remote collectors
-(``collector=ray``)."""
 
 
 def build_training_env(config: TrainConfig) -> TrainingEnv:
@@ -111,40 +90,6 @@ def worker_env(config: TrainConfig, first: int, count: int, seed: int | None = N
     env = build_env(config, num_envs=count, seed=seed, training=training)
     env.set_spawn_seeds(sub_env_seeds(seed, num_envs)[first:first + count])
     return env
-
-
-def build_learner(config: TrainConfig, env: TrainingEnv) -> Learner:
-    obs = config.obs.name
-    shape = env.observation_spec[obs].shape[1:]
-    model = config.model
-    names = state_feature_names(env.config)
-    commands_dim = env.observation_spec["commands"].shape[-1] if model.policy_commands else 0
-    actor = make_actor(obs, shape, config.action.name, env.action_spec, model,
-                       names if obs == "state" else None, commands_dim=commands_dim)
-    costs = [c.name for c in env.constraints]
-    value_keys = {"reward": "state_value", **{c: f"state_value_{c}" for c in costs}}
-    critic_obs = "state" if model.critic_input == "state" else obs
-    critic_shape = env.observation_spec[critic_obs].shape[1:]
-    critic_names = names if critic_obs == "state" else None
-    if model.shared_critic:
-        shared = make_shared_critic(critic_obs, critic_shape, model, list(value_keys.values()),
-                                    critic_names)
-        critics = dict.fromkeys(value_keys, shared)
-    else:
-        critics = {name: make_critic(critic_obs, critic_shape, model, out_key=key,
-                                     feature_names=critic_names)
-                   for name, key in value_keys.items()}
-    ppo = config.ppo
-    loss = LagrangianPPOLoss(actor, critics["reward"], {c: critics[c] for c in costs},
-                             clip_epsilon=ppo.clip_epsilon, entropy_coeff=ppo.entropy_coeff,
-                             critic_coeff=ppo.critic_coeff,
-                             normalize_advantage=ppo.normalize_advantage)
-    advantages = make_advantage_modules(ppo.gamma, ppo.gae_lambda, critics["reward"],
-                                        {c: critics[c] for c in costs}, loss=loss)
-    # foreach: the same updates bit for bit, in fewer kernel launches (pixel update about 6 %)
-    optimizer = torch.optim.Adam(loss.parameters(), lr=ppo.lr, foreach=True)
-    return Learner(actor, critics, loss, advantages, optimizer,
-                   ActionNoise.seeded(config.seed, config.num_envs))
 
 
 def build_multipliers(config: TrainConfig, constraints: Sequence[Constraint]

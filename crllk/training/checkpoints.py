@@ -153,9 +153,7 @@ def checkpoint_state(config: TrainConfig, learner: Learner, multipliers: dict[st
     return {
         "iteration": iteration, "frames": frames, "elapsed": elapsed,
         "config": OmegaConf.to_container(OmegaConf.structured(config)),
-        "actor": learner.actor.state_dict(),
-        "critics": {name: critic.state_dict() for name, critic in learner.critics.items()},
-        "optimizer": learner.optimizer.state_dict(),
+        **learner.state_dict(),
         "multipliers": {name: m.state_dict() for name, m in multipliers.items()},
         "episodes": episodes.state_dict() if snapshots else None,
         "env": env.sim_state() if snapshots else None,
@@ -172,13 +170,9 @@ def restore(state: dict[str, Any], learner: Learner, multipliers: dict[str, Mult
     exactly where they were (their state and the running episode sums restored, and
     :func:`resumed_carry` to continue from); if the checkpoint has no simulations' state or
     ``env`` cannot take one (remote collectors), episodes start afresh."""
-    learner.actor.load_state_dict(state["actor"])
-    for name, critic in learner.critics.items():
-        critic.load_state_dict(state["critics"][name])
-    learner.optimizer.load_state_dict(state["optimizer"])
+    learner.load_state_dict(state)
     for name in multipliers:
         multipliers[name] = multiplier_from_state(state["multipliers"][name])
-    learner.loss.set_multipliers({name: m.value for name, m in multipliers.items()})
     exact = state["env"] is not None and keeps_snapshots(env)
     if exact:
         episodes.load_state_dict(state["episodes"])

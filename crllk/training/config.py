@@ -81,6 +81,8 @@ class AlgoConfig:
     """The learner (``algo=crllk``: learned multipliers; ``algo=ppo``: fixed weights)."""
 
     name: str = setting(check=one_of("crllk", "ppo"))
+    learner: str = "ppo_lagrangian"
+    """The learning algorithm, a module of :mod:`crllk.algos` (checked when the run is built)."""
     multiplier: str = setting("dual", check=one_of("dual", "pid"))
     """dual: projected dual ascent; pid: the PID Lagrangian (Stooke et al. 2020)."""
     schedule: str = setting("batch", check=one_of("episode", "batch"))

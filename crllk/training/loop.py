@@ -4,8 +4,9 @@ One iteration (:func:`learn`, then the logs):
 
 1. collect ``rollout_steps`` control steps in each of ``num_envs`` simulations;
 2. update the multipliers λ from the episodes that finished (dual ascent);
-3. compute GAE advantages for the reward and each cost, and run PPO epochs on the combined
-   advantage (A_r − Σλ_i A_ci) / (1 + Σλ_i);
+3. the learner (:mod:`crllk.algos`, ``algo.learner``) learns from the batch with these
+   multipliers (PPO-Lagrangian: GAE for the reward and each cost, PPO epochs on the combined
+   advantage (A_r − Σλ_i A_ci) / (1 + Σλ_i));
 4. append a row to ``metrics.csv``; every ``checkpoint_every`` iterations (and at the end)
    write ``checkpoints/last.pt`` atomically; at the end (``eval.final``) and every
    ``eval.every`` iterations append an evaluation to ``eval.csv`` (the same episodes as
@@ -67,8 +68,7 @@ from crllk.training.logs import (
     progress_text,
 )
 from crllk.training.run_dir import SOURCE_RUN, lock_run_dir
-from crllk.training.schedules import entropy_coeff, imitation_coeff, learning_rate
-from crllk.training.updates import ppo_update, shape_signals, update_multipliers
+from crllk.training.updates import shape_signals, update_multipliers
 
 if TYPE_CHECKING:
     from crllk.recording.live import LiveView
@@ -99,7 +99,7 @@ def train(config: TrainConfig, on_final_evaluation: FinalEvaluation | None = Non
         raise
     episodes = EpisodeAccumulator(config.num_envs, constraints)
     metrics = CsvLog(run_dir / "metrics.csv",
-                     metric_columns(config.action.name, constraints, learner.loss.out_keys))
+                     metric_columns(config.action.name, constraints, learner.diagnostic_names))
     evaluations = CsvLog(run_dir / "eval.csv", eval_columns(constraints))
     eval_env = record_env = final_result = None
     iteration, frames, elapsed = 0, 0, 0.0
@@ -184,21 +184,17 @@ def learn(config: TrainConfig, env: TrainingEnv, learner: Learner,
           episodes: EpisodeAccumulator, carry: TensorDictBase | None, frames: int
           ) -> tuple[TensorDictBase, TensorDictBase | None, list[EpisodeStats], dict[str, float]]:
     """One iteration of learning after ``frames``: collect ``rollout_steps`` steps of every
-    sub-environment, update the multipliers from the episodes that finished, run the PPO
-    epochs. Returns the batch, the tensordict to continue from, the finished episodes and the
-    mean loss terms."""
+    sub-environment, update the multipliers from the episodes that finished, let the learner
+    learn from the batch. Returns the batch, the tensordict to continue from, the finished
+    episodes and the learner's diagnostics."""
     batch, carry = collect_batch(env, learner.actor, carry, config.rollout_steps,
                                  learner.action_noise)
     finished = episodes.add_batch(batch)
     update_multipliers(multipliers, finished)
-    learner.loss.set_multipliers({name: m.value for name, m in multipliers.items()})
-    learner.loss.set_imitation_coeff(imitation_coeff(config, frames))
-    learner.loss.set_entropy_coeff(entropy_coeff(config, frames))
-    for group in learner.optimizer.param_groups:
-        group["lr"] = learning_rate(config, frames)
-    env.teacher_active = imitation_coeff(config, frames + batch.numel()) > 0
+    learner.prepare(frames, {name: m.value for name, m in multipliers.items()})
+    env.teacher_active = learner.needs_teacher(frames + batch.numel())
     shape_signals(batch, config, env.config)
-    losses = ppo_update(learner, batch, config, generator)
+    losses = learner.update(batch, generator)
     return batch, carry, finished, losses
 
 

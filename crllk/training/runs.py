@@ -89,7 +89,7 @@ def keep_policy(run_dir: str | Path) -> Path | None:
 def load_actor(run_dir: str | Path, env: Any) -> tuple[torch.nn.Module, dict[str, Any]]:
     """The run's policy (:func:`load_run_policy`) built for ``env``, and its counters
     (``iteration``, ``frames``, ``elapsed``) and multipliers."""
-    from crllk.training.build import build_learner
+    from crllk.algos import build_learner
 
     config = load_run_config(run_dir)
     state = load_run_policy(run_dir)

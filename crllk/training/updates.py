@@ -1,4 +1,4 @@
-"""One iteration's learning: shaping the signals, the multipliers' dual ascent, PPO epochs."""
+"""Between collection and the learner's update: shaping the signals, the multipliers' ascent."""
 
 from __future__ import annotations
 
@@ -11,7 +11,6 @@ import crllk  # noqa: F401  (chooses the headless GL backend before torchrl impo
 from crllk.envs.episodes import EpisodeStats
 from crllk.rl.lagrange import Multiplier
 from crllk.tasks.config import TaskConfig
-from crllk.training.build import Learner
 from crllk.training.config import TrainConfig
 
 
@@ -31,33 +30,6 @@ def shape_signals(batch: TensorDictBase, config: TrainConfig, task: TaskConfig) 
             if constraint.signal == "lane_deviation":
                 key = constraint.cost_key
                 nxt[key] = nxt[key] + tail * nxt["terminated"].to(torch.float32)
-
-
-def ppo_update(learner: Learner, batch: TensorDictBase, config: TrainConfig,
-               generator: torch.Generator) -> dict[str, float]:
-    """GAE for every signal, then ``epochs`` passes of minibatch PPO; mean diagnostics."""
-    learner.advantages(batch)
-    flat = batch.reshape(-1)
-    keys = learner.loss.out_keys
-    size, sums, count = flat.shape[0], dict.fromkeys(keys, 0.0), 0
-    # clip each network's gradient on its own, so large value errors do not shrink the policy's
-    networks = {id(n): n for n in (learner.actor, *learner.critics.values())}  # step
-    groups = [list(network.parameters()) for network in networks.values()]
-    for _ in range(config.ppo.epochs):
-        order = torch.randperm(size, generator=generator)
-        for start in range(0, size, config.ppo.minibatch_size):
-            out = learner.loss(flat[order[start:start + config.ppo.minibatch_size]])
-            total = out["loss_objective"] + out["loss_critic"] + out["loss_cost_critic"] + \
-                out["loss_entropy"] + out["loss_imitation"]
-            learner.optimizer.zero_grad(set_to_none=True)
-            total.backward()
-            for group in groups:
-                torch.nn.utils.clip_grad_norm_(group, config.ppo.max_grad_norm)
-            learner.optimizer.step()
-            for key in keys:
-                sums[key] += out[key].item()
-            count += 1
-    return {key: value / count for key, value in sums.items()}
 
 
 def update_multipliers(multipliers: dict[str, Multiplier],

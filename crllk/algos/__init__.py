@@ -1,0 +1,42 @@
+"""Learning algorithms, one module each, behind one interface (:class:`crllk.algos.base.Learner`).
+
+A module of this package that defines ``LEARNER`` (a class with ``name`` and ``build``) is a
+learner; ``algo.learner=<name>`` selects it. Adding one is its module, its configuration and
+its test: nothing else in the package names a learner.
+"""
+
+from __future__ import annotations
+
+import importlib
+import pkgutil
+from functools import cache
+
+from crllk.algos.base import Learner, TrainingEnv
+from crllk.errors import ConfigError
+from crllk.training.config import SOURCE, TrainConfig
+
+__all__ = ["Learner", "build_learner", "learners"]
+
+
+@cache
+def learners() -> dict[str, type[Learner]]:
+    """Every learner of this package, by name."""
+    found: dict[str, type[Learner]] = {}
+    for module in pkgutil.iter_modules(__path__):
+        learner = getattr(importlib.import_module(f"{__name__}.{module.name}"), "LEARNER", None)
+        if learner is not None:
+            found[learner.name] = learner
+    return found
+
+
+def build_learner(config: TrainConfig, env: TrainingEnv) -> Learner:
+    """The learner ``algo.learner`` names, built for ``env``.
+
+    Raises:
+        ConfigError: naming the known learners, if there is none of that name.
+    """
+    known = learners()
+    if config.algo.learner not in known:
+        raise ConfigError(SOURCE, "algo.learner", f"no learner {config.algo.learner!r} "
+                          f"(known: {', '.join(sorted(known))})")
+    return known[config.algo.learner].build(config, env)
