@@ -87,8 +87,10 @@ def host_port(value: str) -> str | None:
     return None if ok else f"must be host:port with a port in [1, {TCP_PORTS - 1}]"
 
 
-def parse(schema: type[Settings], values: Any, source: str) -> Settings:
-    """``values`` (a mapping or an OmegaConf config) merged into ``schema`` and checked.
+def parse(schema: type[Settings], values: Any, source: str, prefix: str = "") -> Settings:
+    """``values`` (a mapping or an OmegaConf config) merged into ``schema`` and checked; a
+    failure names the field after ``prefix`` (settings nested in a larger configuration, e.g.
+    ``algo.options.``).
 
     Raises:
         ConfigError: naming the first field that is missing, of the wrong type or out of range.
@@ -98,11 +100,11 @@ def parse(schema: type[Settings], values: Any, source: str) -> Settings:
         settings: Settings = OmegaConf.to_object(merged)  # type: ignore[assignment]
     except ConfigKeyError as err:
         key = getattr(err, "full_key", None) or "<input>"
-        raise ConfigError(source, str(key), "no such setting") from None
+        raise ConfigError(source, f"{prefix}{key}", "no such setting") from None
     except OmegaConfBaseException as err:
         key = getattr(err, "full_key", None) or "<input>"
-        raise ConfigError(source, str(key), str(err).splitlines()[0]) from None
-    check(settings, source)
+        raise ConfigError(source, f"{prefix}{key}", str(err).splitlines()[0]) from None
+    check(settings, source, prefix)
     return settings
 
 

@@ -12,7 +12,7 @@ from typing import Any, ClassVar
 import pytest
 import torch
 from tensordict import TensorDictBase
-from tiny_runs import read_rows, run_in_process
+from tiny_runs import assert_same_runs, read_rows, run_in_process
 
 from crllk import algos
 from crllk.algos.ppo_lagrangian import PPOLagrangian
@@ -39,7 +39,7 @@ def test_an_unknown_learner_is_one_line_naming_the_known_ones():
     with pytest.raises(ConfigError) as error:
         algos.build_learner(config, None)
     assert str(error.value) == ("override: algo.learner: no learner 'sac' "
-                                "(known: ppo_lagrangian)"), str(error.value)
+                                "(known: ppo_lagrangian, sac_lagrangian)"), str(error.value)
 
 
 @pytest.mark.parametrize("agent", sorted(REFERENCE_AGENTS))
@@ -111,3 +111,17 @@ def test_a_learner_the_trainer_does_not_know_trains_and_resumes(tmp_path, monkey
     assert [r["batches"] for r in rows] == ["1", "2", "3"]
     assert not any(key.startswith("loss_") for key in rows[0])
     assert {"lambda_lane", "lambda_collision"} <= set(rows[0])
+
+
+def test_a_run_whose_teacher_stops_resumes_exactly(tmp_path):
+    """The teacher annealed to zero after two tiny iterations: a run stopped there collects its
+    next batches without it, as the straight run does (no teacher action left over from before,
+    none computed for a batch that does not use it)."""
+    teacher = ["obs=state", "eval.final=false", "ppo.anneal_lr=false", "teacher.coeff=1.0",
+               "teacher.frames=32", "teacher.final=0.0"]
+    stopped = run_in_process(tmp_path / "stopped", 2, teacher)
+    run_in_process(stopped, 4, [*teacher, "resume=true"])
+    straight = run_in_process(tmp_path / "straight", 4, teacher)
+    assert_same_runs(straight, stopped, 4)
+    rows = read_rows(straight / "metrics.csv")
+    assert float(rows[0]["loss_imitation"]) > 0 and float(rows[-1]["loss_imitation"]) == 0

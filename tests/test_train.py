@@ -178,7 +178,7 @@ def test_existing_run_is_not_overwritten(tmp_path):
     ("total_frames=many", "override: total_frames: Value 'many' of type 'str' could not be "
                           "converted to Integer"),
     ("obs=camera", "override: obs: unknown choice 'camera' (choices: pixels, state)"),
-    ("algo=sac", "override: algo: unknown choice 'sac' (choices: crllk, ppo)"),
+    ("algo=sac", "override: algo: unknown choice 'sac' (choices: crllk, ppo, sac_lagrangian)"),
     ("foo=1", "override: foo: no such setting"),
     ("ppo.momentum=0.9", "override: ppo.momentum: no such setting"),
     ("seed", "override: seed: cannot parse this override"),

@@ -243,6 +243,8 @@ class BatchedLaneKeepingEnv(EnvBase):
             self._commands[i] = [value for duty in task.command_history for value in duty]
         if self.teacher_active and self.teachers:
             self._teacher_actions[i] = self.teachers[i].action(physics)
+        elif self.teachers:  # none left over while off: a resumed run sees what a straight one does
+            self._teacher_actions[i] = 0
 
     def _apply_camera_effects(self, indices: Sequence[int]) -> None:
         """The camera effects of the episodes of sub-environments ``indices`` (randomised JPEG

@@ -12,8 +12,11 @@ r − Σ λ_i c_i. A loss that standardises its advantage per minibatch (TorchRL
 changes nothing, and the multipliers alone set the balance between reward and costs.
 
 :class:`LagrangianAdvantage` writes A where any policy-gradient loss reads its advantage, so the
-loss itself needs to know nothing of constraints. The multipliers are learned outside it
-(:mod:`crllk.rl.lagrange`) and handed over with :meth:`LagrangianAdvantage.set_multipliers`.
+loss itself needs to know nothing of constraints. The combination is linear, so the same module
+on per-step signals gives the penalised reward (r − Σ_i λ_i c_i) / (1 + Σ_i λ_i) that a
+value-based learner's stock loss can learn from (:mod:`crllk.algos.sac_lagrangian`). The
+multipliers are learned outside it (:mod:`crllk.rl.lagrange`) and handed over with
+:meth:`LagrangianAdvantage.set_multipliers`.
 """
 
 from __future__ import annotations
@@ -22,6 +25,7 @@ from collections.abc import Mapping, Sequence
 
 import torch
 from tensordict import TensorDictBase
+from tensordict.utils import NestedKey
 from torch import nn
 
 REWARD_ADVANTAGE = "advantage_reward"
@@ -54,14 +58,18 @@ class LagrangianAdvantage(nn.Module):
         cost_names: the costs, in the order of the ``lagrange`` buffer.
         reward_key: the reward advantage read.
         out_key: where the combined advantage is written.
+        cost_keys: where each cost's advantage is read (default ``advantage_<cost>``).
         lagrange: initial multipliers (zeros by default).
     """
 
-    def __init__(self, cost_names: Sequence[str], *, reward_key: str = REWARD_ADVANTAGE,
-                 out_key: str = ADVANTAGE, lagrange: Sequence[float] | None = None) -> None:
+    def __init__(self, cost_names: Sequence[str], *, reward_key: NestedKey = REWARD_ADVANTAGE,
+                 out_key: NestedKey = ADVANTAGE, cost_keys: Mapping[str, NestedKey] | None = None,
+                 lagrange: Sequence[float] | None = None) -> None:
         super().__init__()
         self.cost_names = check_cost_names(cost_names)
         self.reward_key, self.out_key = reward_key, out_key
+        cost_keys = cost_keys or {}
+        self.cost_keys = [cost_keys.get(n, cost_advantage_key(n)) for n in self.cost_names]
         self.register_buffer("lagrange", torch.zeros(len(self.cost_names)))
         if lagrange is not None:
             self.set_multipliers(lagrange)
@@ -104,11 +112,11 @@ class LagrangianAdvantage(nn.Module):
         Raises:
             KeyError: naming an advantage the batch lacks.
         """
-        missing = [k for k in (self.reward_key, *map(cost_advantage_key, self.cost_names))
+        missing = [k for k in (self.reward_key, *self.cost_keys)
                    if tensordict.get(k, None) is None]
         if missing:
-            raise KeyError(f"the λ-combination needs the advantages {missing}, which the batch "
-                           "lacks (one GAE per signal writes them first)")
-        costs = [tensordict.get(cost_advantage_key(n)) for n in self.cost_names]
+            raise KeyError(f"the λ-combination needs the entries {missing}, which the batch "
+                           "lacks (for advantages: one GAE per signal writes them first)")
+        costs = [tensordict.get(key) for key in self.cost_keys]
         tensordict.set(self.out_key, self.combine(tensordict.get(self.reward_key), costs))
         return tensordict

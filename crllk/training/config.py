@@ -83,6 +83,8 @@ class AlgoConfig:
     name: str = setting(check=one_of("crllk", "ppo"))
     learner: str = "ppo_lagrangian"
     """The learning algorithm, a module of :mod:`crllk.algos` (checked when the run is built)."""
+    options: dict[str, Any] = field(default_factory=dict)
+    """The learner's own settings, checked by its module (``algo.options.<name>``)."""
     multiplier: str = setting("dual", check=one_of("dual", "pid"))
     """dual: projected dual ascent; pid: the PID Lagrangian (Stooke et al. 2020)."""
     schedule: str = setting("batch", check=one_of("episode", "batch"))

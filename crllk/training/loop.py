@@ -106,6 +106,8 @@ def train(config: TrainConfig, on_final_evaluation: FinalEvaluation | None = Non
 
     if resuming:
         state = load_checkpoint(checkpoint_path, resuming=True)
+        # as the iteration before left it, so that the run collects as the straight one
+        env.teacher_active = learner.needs_teacher(state["frames"])
         exact = restore(state, learner, multipliers, episodes, env, generator)
         carry = resumed_carry(state) if exact else first_carry(env)
         iteration, frames, elapsed = state["iteration"], state["frames"], state["elapsed"]
@@ -117,6 +119,7 @@ def train(config: TrainConfig, on_final_evaluation: FinalEvaluation | None = Non
     else:
         run_dir.mkdir(parents=True, exist_ok=True)
         atomic_write_text(run_dir / "config.yaml", OmegaConf.to_yaml(OmegaConf.structured(config)))
+        env.teacher_active = learner.needs_teacher(0)
         carry = first_carry(env)
         print(f"run directory: {run_dir}", flush=True)
     live = open_live_view(config, run_dir, constraints)
