@@ -90,7 +90,8 @@ def test_the_ring_overwrites_the_oldest_and_samples_what_it_holds():
     ("obs=pixels", "override: obs: sac_lagrangian learns from state (obs=state): a replay "
                    "buffer of camera images would not fit a checkpoint"),
     ("algo.options.gamma=1.5", "override: algo.options.gamma: must lie in [0, 1], got 1.5"),
-    ("+algo.options.gama=0.9", "override: algo.options.gama: no such setting"),
+    ("algo.options.gama=0.9", "override: algo.options.gama: no such setting (python -m "
+                              "crllk.train --cfg job lists them all)"),
 ])
 def test_what_it_cannot_do_is_one_line(tmp_path, override, message):
     with pytest.raises(ConfigError) as error:

@@ -31,6 +31,7 @@ class PPOLagrangian:
     loss and its Adam optimiser (see the module's docs)."""
 
     name: ClassVar[str] = "ppo_lagrangian"
+    Settings: ClassVar[type | None] = None  # its settings are still the trainer's ppo.*
 
     def __init__(self, config: TrainConfig, actor: torch.nn.Module,
                  critics: dict[str, torch.nn.Module], cost_names: list[str]) -> None:

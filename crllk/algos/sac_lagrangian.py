@@ -15,8 +15,7 @@ PPO-Lagrangian.
 From state only (``obs=state``): a buffer of camera images at this size (200,000 frames of
 30×40×3) would hold 720 MB and go into every checkpoint.
 
-Its settings are ``algo.options.*`` (:class:`SACSettings`, their values in
-``crllk/conf/algo/sac_lagrangian.yaml``).
+Its settings are ``algo.options.*`` (:class:`SACSettings`).
 """
 
 from __future__ import annotations
@@ -50,29 +49,28 @@ PENALISED_REWARD = "penalised_reward"
 
 @dataclass
 class SACSettings:
-    """SAC-Lagrangian's settings (``algo.options.<name>``); their values are in
-    ``crllk/conf/algo/sac_lagrangian.yaml``."""
+    """SAC-Lagrangian's settings (``algo.options.<name>``)."""
 
-    gamma: float = setting(check=unit_interval)
+    gamma: float = setting(0.97, check=unit_interval)
     """Discount of the soft Q-values."""
-    lr: float = setting(check=positive)
+    lr: float = setting(3e-4, check=positive)
     """Adam's learning rate, for the policy, the Q-networks and the temperature."""
-    batch_size: int = setting(check=positive)
+    batch_size: int = setting(256, check=positive)
     """Transitions per gradient step."""
-    buffer_frames: int = setting(check=positive)
+    buffer_frames: int = setting(200_000, check=positive)
     """Replay capacity (frames); the oldest are overwritten."""
-    warmup_frames: int = setting(check=non_negative)
+    warmup_frames: int = setting(5_000, check=non_negative)
     """No gradient step until the buffer holds this many frames."""
-    updates_per_frame: float = setting(check=positive)
+    updates_per_frame: float = setting(0.125, check=positive)
     """Gradient steps per collected frame (0.125: 128 per iteration of 1,024 frames)."""
-    tau: float = setting(check=open_unit_interval)
+    tau: float = setting(0.005, check=open_unit_interval)
     """Polyak step of the target Q-networks."""
-    alpha_init: float = setting(check=positive)
+    alpha_init: float = setting(0.2, check=positive)
     """Initial entropy temperature."""
-    target_entropy_fraction: float = setting(check=open_unit_interval)
+    target_entropy_fraction: float = setting(0.5, check=open_unit_interval)
     """Discrete actions: the target entropy as a fraction of the uniform policy's (log of the
     number of actions); continuous: −(action dimensions)."""
-    max_grad_norm: float = setting(check=positive)
+    max_grad_norm: float = setting(10.0, check=positive)
     """Each gradient step's norm is clipped to this."""
 
 
@@ -131,6 +129,7 @@ class SACLagrangian:
     replay buffer (see the module's docs)."""
 
     name: ClassVar[str] = "sac_lagrangian"
+    Settings: ClassVar[type] = SACSettings
     LOSS_NAMES: ClassVar[tuple[str, ...]] = ("loss_actor", "loss_qvalue", "loss_alpha")
 
     def __init__(self, config: TrainConfig, settings: SACSettings, actor: nn.Module,
@@ -157,7 +156,7 @@ class SACLagrangian:
         Raises:
             ConfigError: for ``obs=pixels``, or settings out of range.
         """
-        settings = parse(SACSettings, config.algo.options, SOURCE, OPTIONS)
+        settings = parse(cls.Settings, config.algo.options, SOURCE, OPTIONS)
         if config.obs.name != "state":
             raise ConfigError(SOURCE, "obs", f"{cls.name} learns from state (obs=state): a "
                               "replay buffer of camera images would not fit a checkpoint")

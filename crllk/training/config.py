@@ -314,6 +314,8 @@ def validate(cfg: DictConfig | dict[str, Any]) -> TrainConfig:
     Raises:
         ConfigError: naming the first field that is missing, of the wrong type or out of range.
     """
+    if isinstance(cfg, DictConfig):  # a learner's typed options (algo/options) as plain values:
+        cfg = OmegaConf.to_container(cfg)  # its own module checks them
     return parse(TrainConfig, cfg, SOURCE)
 
 
