@@ -25,6 +25,7 @@ import numpy as np
 from gymnasium import spaces
 
 from crllk.paths import task_names
+from crllk.tasks.constraints import cost_key
 from crllk.tasks.lane_keeping import load
 
 VARIANTS = {"": ("pixels", "discrete"), "-State": ("state", "discrete"),
@@ -71,7 +72,7 @@ class LaneKeepingEnv(gymnasium.Env):
     def step(self, action) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         step = self._env.step(self._checked(action))
         outcome = self._env.task.episode.outcome
-        info: dict[str, Any] = {f"cost_{name}": float(step.observation[f"cost_{name}"])
+        info: dict[str, Any] = {cost_key(name): float(step.observation[cost_key(name)])
                                 for name in self.constraints}
         info["cost"] = float(sum(info.values()))
         info["termination"] = outcome.termination

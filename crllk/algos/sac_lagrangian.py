@@ -34,10 +34,10 @@ from torchrl.objectives import DiscreteSACLoss, SACLoss, SoftUpdate, ValueEstima
 from crllk.algos.base import TrainingEnv
 from crllk.errors import ConfigError
 from crllk.rl.lagrangian_advantage import LagrangianAdvantage
-from crllk.rl.loss import cost_reward_key
 from crllk.rl.models import make_actor, make_encoder
 from crllk.rl.sampling import ActionNoise
 from crllk.settings import non_negative, open_unit_interval, parse, positive, setting, unit_interval
+from crllk.tasks.constraints import cost_key
 from crllk.tasks.lane_keeping import state_feature_names
 from crllk.training.config import SOURCE, TrainConfig
 from crllk.training.plain import tensordict_from_plain, tensordict_to_plain
@@ -142,11 +142,11 @@ class SACLagrangian:
         self.optimizer = torch.optim.Adam(loss.parameters(), lr=settings.lr)
         self.combination = LagrangianAdvantage(
             cost_names, reward_key=("next", "reward"), out_key=("next", PENALISED_REWARD),
-            cost_keys={c: ("next", cost_reward_key(c)) for c in cost_names})
+            cost_keys={c: ("next", cost_key(c)) for c in cost_names})
         self.buffer = ReplayRing(settings.buffer_frames)
         self.action_noise = ActionNoise.seeded(config.seed, config.num_envs)
         self._keys = sorted({*actor.in_keys, *loss.qvalue_network.in_keys} - {"action"})
-        self._costs = [("next", cost_reward_key(c)) for c in cost_names]
+        self._costs = [("next", cost_key(c)) for c in cost_names]
         self._carry = 0.0  # fractional gradient steps owed from earlier updates
 
     @classmethod

@@ -18,7 +18,7 @@ import numpy as np
 import torch
 from tensordict import TensorDictBase
 
-from crllk.tasks.constraints import Constraint
+from crllk.tasks.constraints import Constraint, cost_key
 
 
 @dataclass(frozen=True)
@@ -40,7 +40,7 @@ class EpisodeStats:
     def as_row(self) -> dict[str, Any]:
         """One flat row: ``cost_<name>`` per constraint."""
         return {"env_index": self.env_index, "distance": self.distance,
-                **{f"cost_{name}": value for name, value in self.costs.items()},
+                **{cost_key(name): value for name, value in self.costs.items()},
                 "length": self.length, "truncated": self.truncated, "encounter": self.encounter}
 
 

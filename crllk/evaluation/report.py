@@ -13,6 +13,7 @@ from crllk.envs.episodes import summarise
 from crllk.evaluation.intervals import metric_interval
 from crllk.rl.rollout import EvaluationResult
 from crllk.tasks.actions import DISCRETE_NAMES
+from crllk.tasks.constraints import cost_key
 
 CONTINUOUS_BINS = np.linspace(-1.0, 1.0, 11)
 """Edges of the continuous action histogram (velocity and steering lie in [-1, 1])."""
@@ -34,7 +35,7 @@ _OLDER_ROW_KEYS = {"lane": "lane_cost", "collision": "collisions"}
 
 def episode_cost(row: dict[str, Any], name: str) -> float:
     """Constraint ``name``'s value in one episode row of an ``eval.json`` (``cost_<name>``)."""
-    key = f"cost_{name}"
+    key = cost_key(name)
     return float(row[key] if key in row else row[_OLDER_ROW_KEYS[name]])
 
 

@@ -24,14 +24,10 @@ from torchrl.objectives import LossModule
 from torchrl.objectives.value import GAE
 
 from crllk.rl.lagrangian_advantage import REWARD_ADVANTAGE, check_cost_names, cost_advantage_key
+from crllk.tasks.constraints import cost_key
 
 _ADVANTAGE_STD_EPS = 1e-6  # floor of the advantage std when standardising (advantage units)
 _TEACHER_MARGIN = 1e-3  # continuous teacher actions are clamped this far inside [-1, 1]
-
-
-def cost_reward_key(name: str) -> str:
-    """The per-step cost entry of cost ``name``, read by GAE from ``("next", key)``."""
-    return f"cost_{name}"
 
 
 def _cost_key_defaults(name: str) -> dict[str, str]:
@@ -405,7 +401,7 @@ def make_advantage_modules(
             target, value = loss.cost_keys(name)
         module = GAE(gamma=gamma, lmbda=lmbda, value_network=critic, average_gae=average_gae)
         module.set_keys(
-            reward=cost_reward_key(name), value=value, advantage=advantage, value_target=target
+            reward=cost_key(name), value=value, advantage=advantage, value_target=target
         )
         costs[name] = module
     return AdvantageModules(reward=reward, costs=costs)

@@ -29,6 +29,12 @@ SIGNALS = {
 """Per-step signals the lane-keeping task computes, by name."""
 
 
+def cost_key(name: str) -> str:
+    """The per-step entry of constraint ``name``'s cost, in the environment's observations, the
+    batches (under ``next``), episode rows and Gymnasium's ``info`` (``cost_<name>``)."""
+    return f"cost_{name}"
+
+
 @dataclass(frozen=True)
 class Constraint:
     """One constraint: E[episode aggregate of ``signal``] <= a threshold (set by the trainer)."""
@@ -47,7 +53,7 @@ class Constraint:
     @property
     def cost_key(self) -> str:
         """The environment's per-step entry of this constraint's cost."""
-        return f"cost_{self.name}"
+        return cost_key(self.name)
 
     def episode_value(self, total: float, length: int) -> float:
         """The episode's value from the sum of its per-step signal over ``length`` steps."""
