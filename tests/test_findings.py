@@ -188,3 +188,73 @@ def test_the_readme_s_distance_to_the_best_fixed_pair_is_the_sweep_s():
         travel = sum(e["J_R"] for e in entry["evaluations"]) / len(entry["evaluations"])
         gaps.append(abs(travel - best["J_R"]["mean"]))
     assert f"within {max(gaps) + 0.005:.2f} m" in (REPO / "README.md").read_text()
+
+
+def _test_document(task: str, agent: str, seed: int, name: str = "test") -> dict:
+    return json.loads((REPO / f"results/runs/pixels/{task}/{agent}-a0.5-seed{seed}/{name}.json")
+                      .read_text())
+
+
+CRLLK_SEEDS = {"CRLLK-D": (0, 1, 2), "CRLLK-C": (0, 1, 2)}
+
+
+def test_the_readme_s_obstacle_loop_figures_are_the_test_evaluations():
+    """The prose of "In short" and of the results from the camera: the sampled CRLLK-D's and
+    PPO-D's J_coll, the final λ_coll, the collisions with the curve duckie among all of the
+    CRLLK runs' test collisions, and J_clane in the blocked direction, from the runs'
+    ``test.json`` and ``test-mode.json``; the teacher said never to collide does not."""
+    readme = " ".join((REPO / "README.md").read_text().split())
+    crllk = [_test_document("obstacle_loop", "CRLLK-D", s)["summary"]["J_coll"] for s in (0, 1, 2)]
+    ppo = [_test_document("obstacle_loop", "PPO-D", s)["summary"]["J_coll"] for s in (0, 1)]
+    lam = [_test_document("obstacle_loop", "CRLLK-D", s)["source"]["multipliers"]["collision"]
+           for s in (0, 1, 2)]
+    hits = total = 0
+    intended = []
+    for agent, seeds in CRLLK_SEEDS.items():
+        for seed in seeds:
+            for name in ("test", "test-mode"):
+                breakdown = _test_document("obstacle_loop", agent, seed, name)["breakdown"]
+                objects = breakdown["collisions_by_object"]
+                total += sum(objects.values())
+                hits += objects.get("3 duckie (0.88, 0.88)", 0)
+                intended.append(breakdown["by_direction"]["intended"]["J_clane"])
+    assert (f"the sampled CRLLK-D gives J_coll {crllk[0]:.3f}, {crllk[1]:.3f} and {crllk[2]:.3f}, "
+            f"against {ppo[0]:.3f} and {ppo[1]:.3f} for the original's fixed weights") in readme
+    assert f"{hits} of the CRLLK runs' {total} test collisions are with one duckie" in readme
+    assert f"{hits} of the {total} collisions of the CRLLK runs' test episodes" in readme
+    assert (f"its learned λ_coll ended at {lam[0]:.1f}, {lam[1]:.1f} and {lam[2]:.1f}), where the "
+            f"original's fixed weight of 4 gives PPO-D {ppo[0]:.3f} and {ppo[1]:.3f}") in readme
+    spread = f"{min(intended):.2f}–{max(intended):.2f} dm"
+    assert f"every run deviates {spread}, over α1" in readme
+    assert f"J_clane is {spread} for every CRLLK run" in readme
+    teacher = json.loads((REPO / "results/scripted/teacher-obstacle_loop-margin0.07.json")
+                         .read_text())["teacher"]
+    assert teacher["summary"]["J_coll"] == 0
+    assert teacher["breakdown"]["by_direction"]["intended"]["J_clane"] >= min(intended)
+
+
+def _misses(task: str, agents: dict[str, tuple[int, ...]], name: str) -> list[tuple]:
+    """(agent, seed, J_coll) of the runs whose test evaluation misses a constraint."""
+    found = []
+    for agent, seeds in agents.items():
+        for seed in seeds:
+            summary = _test_document(task, agent, seed, name)["summary"]
+            if summary["J_clane"] > 0.5 or summary["J_coll"] > 0.02:
+                found.append((agent, seed, f"{summary['J_coll']:.2f}"))
+    return found
+
+
+def test_the_readme_s_maps_without_obstacles_are_the_test_evaluations():
+    """"every seed" on small_loop; on zigzag one sampled and one deployed miss, each J_coll
+    0.03, as the prose names them; the fixed weights' one miss."""
+    for name in ("test", "test-mode"):
+        assert _misses("small_loop", CRLLK_SEEDS, name) == []
+    assert _misses("zigzag", CRLLK_SEEDS, "test") == [("CRLLK-C", 2, "0.03")]
+    assert _misses("zigzag", CRLLK_SEEDS, "test-mode") == [("CRLLK-D", 2, "0.03")]
+    baselines = {"PPO-D": (0, 1), "PPO-C": (0, 1)}
+    assert [m for task in ("small_loop", "zigzag") for m in _misses(task, baselines, "test")] \
+        == [("PPO-C", 1, "0.03")]
+    readme = " ".join((REPO / "README.md").read_text().split())
+    assert "the misses are J_coll 0.03 (zigzag: CRLLK-C seed 2 sampled, CRLLK-D seed 2 deployed)" \
+        in readme
+    assert "one run (zigzag, PPO-C seed 1 sampled, J_coll 0.03)" in readme

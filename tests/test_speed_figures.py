@@ -47,23 +47,9 @@ def test_the_training_rows_are_the_committed_rounds(row):
     assert f"| {row} | " + " | ".join(cells) + " |" in README
 
 
-def test_the_default_command_s_results_are_the_committed_ones():
-    """The prose about the timed run quotes its committed evaluations."""
-    import json
-
-    run = WALL_TIME.parent
-    sampled = json.loads((run / "eval.json").read_text())
-    mode = json.loads((run / "eval-mode.json").read_text())
-    s, d = sampled["summary"], sampled["breakdown"]["by_direction"]
-    assert (f"It ended at J_clane {s['J_clane']:.3f} dm, **J_coll {s['J_coll']:.2f}**, J_R "
-            f"{s['J_R']:.2f} m") in README
-    intended, reverse = d["intended"], d["reverse"]
-    assert (f"({intended['episodes']} of 100) gave **J_clane {intended['J_clane']:.3f} dm** and "
-            f"J_coll {intended['J_coll']:.3f}, the {reverse['episodes']} reverse ones "
-            f"{reverse['J_clane']:.3f} dm and {reverse['J_coll']:.0f}") in " ".join(README.split())
-    m = mode["summary"]
-    assert f"J_clane {m['J_clane']:.3f} dm, J_coll {m['J_coll']:.2f} (8" in README
-    training_s = float((run / "eval.csv").read_text().splitlines()[-1].split(",")[2])
+def test_the_default_command_s_training_time_is_the_committed_one():
+    """The prose about the timed run quotes its committed training time."""
+    training_s = float((WALL_TIME.parent / "eval.csv").read_text().splitlines()[-1].split(",")[2])
     assert f"{training_s / 60:.1f} min of training" in README
 
 

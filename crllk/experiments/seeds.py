@@ -19,7 +19,9 @@ from typing import Any
 from crllk.evaluation.report import DIRECTIONS
 from crllk.experiments.runs import MAP_TASKS
 from crllk.files import atomic_write_text
+from crllk.paths import task_file, task_names
 from crllk.protocol import TEST_SEED
+from crllk.yaml_files import read_yaml
 
 SEED_OF_RUN = re.compile(r"-seed(\d+)$")
 """The training seed at the end of a run directory's name (``CRLLK-D-a0.5-seed1``)."""
@@ -163,12 +165,19 @@ def seeds_markdown(documents: Mapping[str, Mapping[str, Any]]) -> str:
     for document in documents.values():
         if any("by_direction" in entry for entry in document["agents"].values()):
             lines += [f"## By start direction: {document['task']}", "",
-                      "The obstacles of this map block one direction of the loop: the "
-                      "constraints over the episodes that started in each direction (J_clane "
-                      "/ J_coll with their 95 % intervals; marks: point estimate, upper "
-                      "bound).", "", *direction_table(document),
+                      f"{_directions_note(document['task'])} The constraints over the episodes "
+                      "that started in each direction of the loop (J_clane / J_coll with their "
+                      "95 % intervals; marks: point estimate, upper bound).", "",
+                      *direction_table(document),
                       *(["", *direction_table(document, mode=True)] if with_mode else []), ""]
     return "\n".join(lines)
+
+
+def _directions_note(task: str) -> str:
+    """Whether the shipped task's obstacles stand in the lane of one direction."""
+    if task in task_names() and (read_yaml(task_file(task)).get("map") or {}).get("objects"):
+        return "The obstacles of this map stand in the lane of one direction (the intended one)."
+    return "This map has no obstacles."
 
 
 def direction_table(document: Mapping[str, Any], mode: bool = False) -> list[str]:
