@@ -28,6 +28,7 @@ from pathlib import Path
 
 from crllk.cli import run
 from crllk.errors import ConfigError
+from crllk.rl.plain import as_plain, first_non_plain
 from crllk.settings import MISSING, parse_dotlist, setting
 from crllk.training.checkpoints import (
     CONVERTED_FORMATS,
@@ -37,7 +38,6 @@ from crllk.training.checkpoints import (
     read_state,
     write_state,
 )
-from crllk.training.plain import as_plain, first_non_plain
 from crllk.training.runs import CHECKPOINT_FILE
 
 SOURCE = "convert"

@@ -35,6 +35,7 @@ from pathlib import Path
 from typing import Any
 
 from crllk.cli import one_line, run
+from crllk.config import algo_thresholds
 from crllk.errors import ConfigError
 from crllk.files import WriteError, atomic_write_text, write_problem
 from crllk.protocol import VALIDATION_SEED
@@ -49,7 +50,6 @@ from crllk.settings import (
 )
 from crllk.tasks.actions import ACTIONS
 from crllk.tasks.follower import FollowerGains
-from crllk.training.config import algo_thresholds
 from crllk.training.run_dir import EVAL_RECORDING
 
 SOURCE = "evaluate"

@@ -1,7 +1,7 @@
 """``python -m crllk.train task=<name>``: Lagrangian PPO (CRLLK) or fixed-weight PPO on a task.
 
 Hydra composes the configuration (:mod:`crllk.training.compose`: the schema
-:class:`~crllk.training.config.TrainConfig`, the groups in ``crllk/conf``, and every
+:class:`~crllk.config.TrainConfig`, the groups in ``crllk/conf``, and every
 ``tasks/<name>.yaml`` as a choice of the ``task`` group), :func:`resolve_config` checks it
 (a resumed run keeps its saved settings) and :func:`crllk.training.loop.train` trains; the
 evaluation it makes at the end becomes the run's ``eval.json``, as ``python -m crllk.evaluate``
@@ -17,6 +17,7 @@ from omegaconf import DictConfig, OmegaConf
 
 import crllk  # noqa: F401  (chooses the headless GL backend before torchrl imports mujoco)
 from crllk.cli import exit_status
+from crllk.config import TrainConfig, upgrade, validate
 from crllk.errors import ConfigError
 from crllk.network import keep_ray_launcher_local
 from crllk.training.compose import (
@@ -25,7 +26,6 @@ from crllk.training.compose import (
     register,
     task_paths_as_task_file,
 )
-from crllk.training.config import TrainConfig, upgrade, validate
 
 RESUME_KEEPS = ("total_frames", "progress", "threads", "workers", "collector", "ray_address",
                 "checkpoint_every", "record_every", "viewer", "live", "live_port")

@@ -10,12 +10,12 @@ from typing import Any
 
 import pytest
 
+from crllk.config import validate
 from crllk.experiments import EXPERIMENTS
 from crllk.experiments.aids import AIDS, aids, aids_markdown, aids_specs, buys_lines
 from crllk.experiments.runs import THRESHOLDS, Outcome, RunSpec, Settings, sweep_commands
 from crllk.experiments.teacher import TEACHER, TEACHER_VARIANTS, teacher_markdown, teacher_specs
 from crllk.training.compose import compose_config
-from crllk.training.config import validate
 
 REPO = Path(__file__).resolve().parents[1]
 CONSTRAINTS = [{"name": "lane", "metric": "J_clane", "unit": "dm"},

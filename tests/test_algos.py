@@ -16,9 +16,9 @@ from tiny_runs import assert_same_runs, read_rows, run_in_process
 
 from crllk import algos
 from crllk.algos.ppo_lagrangian import PPOLagrangian
+from crllk.config import validate
 from crllk.errors import ConfigError
 from crllk.training.compose import compose_config
-from crllk.training.config import validate
 
 REFERENCES = Path(__file__).parent / "data" / "reference_metrics"
 REFERENCE_OVERRIDES = ["obs=state", "task=obstacle_loop", "seed=3", "eval.final=false",

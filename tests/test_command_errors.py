@@ -15,10 +15,10 @@ from omegaconf import OmegaConf
 
 from crllk import evaluate, experiments, pictures, record
 from crllk.cli import DEBUG_VARIABLE, exit_status
+from crllk.config import validate
 from crllk.files import STALE_TEMP_AGE_S, atomic_write_text
 from crllk.train import resolve_config
 from crllk.training.compose import compose_config
-from crllk.training.config import validate
 from crllk.training.loop import train
 
 REPO = Path(__file__).resolve().parent.parent

@@ -8,10 +8,10 @@ import pytest
 import torch
 from tiny_runs import assert_same_runs, compose_config, run_in_process
 
+from crllk.config import validate
 from crllk.envs.batched import make_env, merge_sim_states, split_sim_state
 from crllk.errors import ConfigError
 from crllk.tasks.frames import FrameHistory
-from crllk.training.config import validate
 
 HORIZON = {"horizon": 20}
 

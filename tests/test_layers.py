@@ -19,9 +19,10 @@ LAYERS = (
     ("crllk.sim",),
     ("crllk.tasks",),
     ("crllk.envs", "crllk.gym"),
-    ("crllk.rl",),
+    ("crllk.rl", "crllk.config"),
     ("crllk.recording",),
-    ("crllk.training", "crllk.algos"),
+    ("crllk.algos",),
+    ("crllk.training",),
     ("crllk.evaluation",),
     ("crllk.analysis", "crllk.deployment"),
     ("crllk.train", "crllk.evaluate", "crllk.record", "crllk.experiments", "crllk.pictures",
@@ -29,7 +30,8 @@ LAYERS = (
      "crllk.convert"),
 )
 """Bottom to top, in the order data flows: maps, MuJoCo, dm-control tasks, TorchRL
-environments, learning, recording, the trainer, evaluation of runs, analysis, commands."""
+environments, learning (and a run's settings), recording, the learners, the trainer, evaluation
+of runs, analysis, commands."""
 
 
 def _module_name(path: Path) -> str:

@@ -12,6 +12,7 @@ import rerun as rr
 from tiny_runs import compose_config, run_in_process
 
 import crllk
+from crllk.config import validate
 from crllk.errors import ConfigError
 from crllk.recording import live
 from crllk.recording.live import PREFIX, THRESHOLD, LiveView
@@ -20,7 +21,6 @@ from crllk.recording.recorder import read_recording, record_episodes
 from crllk.recording.viewer import free_port
 from crllk.tasks.constraints import BUILTIN
 from crllk.tasks.follower import FollowerPolicy
-from crllk.training.config import validate
 
 CONSTRAINTS = (BUILTIN["lane"], BUILTIN["collision"])
 THRESHOLDS = {"lane": 0.5, "collision": 0.02}

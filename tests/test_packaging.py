@@ -10,8 +10,8 @@ import sys
 from pathlib import Path
 
 import crllk
+from crllk.config import validate
 from crllk.training.compose import compose_config
-from crllk.training.config import validate
 
 REPO = Path(__file__).resolve().parents[1]
 SOURCES = ("pyproject.toml", "setup.py", "MANIFEST.in", "README.md", "crllk", "assets", "tasks")

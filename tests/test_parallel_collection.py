@@ -17,13 +17,13 @@ import pytest
 from joblib import Parallel, delayed
 from tiny_runs import assert_same_runs, read_rows, run_in_process
 
+from crllk.config import validate
 from crllk.envs.parallel import ParallelLaneKeepingEnv, WorkerError
 from crllk.errors import ConfigError
 from crllk.evaluation.runs import evaluate_run
 from crllk.rl.rollout import run_episodes
 from crllk.training.build import build_eval_env, worker_env
 from crllk.training.compose import compose_config
-from crllk.training.config import validate
 from crllk.training.runs import load_actor, load_run_config
 
 NUM_ENVS, ROLLOUT = 2, 4

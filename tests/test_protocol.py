@@ -10,11 +10,11 @@ from pathlib import Path
 import pytest
 from omegaconf import OmegaConf
 
+from crllk.config import validate
 from crllk.errors import ConfigError
 from crllk.experiments.runs import Settings
 from crllk.protocol import TEST_EPISODES, TEST_SEED, VALIDATION_EPISODES, VALIDATION_SEED
 from crllk.training.compose import compose_config
-from crllk.training.config import validate
 
 REPO = Path(__file__).resolve().parents[1]
 SEED_TEXTS = (str(TEST_SEED), f"{TEST_SEED:_}", f"{TEST_SEED:,}")

@@ -13,10 +13,10 @@ from torch.distributions import Categorical
 from torchrl.envs.utils import ExplorationType, set_exploration_type
 from torchrl.modules import TanhNormal
 
+from crllk.config import validate
 from crllk.rl.sampling import POLICY_ROWS, ActionNoise, action_noise_seeds, draw, sample_actions
 from crllk.training.build import build_run
 from crllk.training.compose import compose_config
-from crllk.training.config import validate
 
 
 class FixedNoise:

@@ -8,9 +8,9 @@ from dataclasses import dataclass, field
 import pytest
 from omegaconf import OmegaConf
 
+from crllk.config import CONF_DIR, ConstraintConfig, TrainConfig
 from crllk.errors import ConfigError
 from crllk.settings import parse, parse_dotlist, positive, setting, unit_interval
-from crllk.training.config import CONF_DIR, ConstraintConfig, TrainConfig
 
 
 @dataclass

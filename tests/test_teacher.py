@@ -106,9 +106,9 @@ def test_the_evaluated_teacher_keeps_the_margin_asked_for():
 def test_the_teachers_margin_is_a_training_setting():
     """``teacher.margin`` sets the gap the teacher keeps beside obstacles; a wider one swerves
     further left in front of the same obstacle."""
+    from crllk.config import validate
     from crllk.training.build import build_env
     from crllk.training.compose import compose_config
-    from crllk.training.config import validate
 
     config = validate(compose_config(["task=obstacle_loop", "obs=state", "teacher.margin=0.07"]))
     env = build_env(config, num_envs=1, seed=0, training=True)

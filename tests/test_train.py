@@ -24,9 +24,9 @@ from tiny_runs import (
     run_in_process,
 )
 
+from crllk.config import validate
 from crllk.errors import ConfigError
 from crllk.training.checkpoints import load_checkpoint
-from crllk.training.config import validate
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -267,7 +267,7 @@ def test_a_run_being_trained_cannot_be_trained_twice(tmp_path):
 
 def test_imitation_weight_schedule():
     """teacher.coeff 1 falling to teacher.final 0.1 over 100 frames, then staying there."""
-    from crllk.training.schedules import imitation_coeff
+    from crllk.algos.schedules import imitation_coeff
 
     config = validate(compose_config(["teacher.coeff=1.0", "teacher.final=0.1",
                                       "teacher.frames=100"]))
@@ -280,7 +280,7 @@ def test_imitation_weight_schedule():
 def test_learning_rate_schedule():
     """ppo.lr 0.002 annealed over 1000 frames to a tenth of it; constant without anneal_lr;
     a final fraction outside [0, 1] is refused."""
-    from crllk.training.schedules import learning_rate
+    from crllk.algos.schedules import learning_rate
 
     config = validate(compose_config(["ppo.lr=0.002", "ppo.anneal_lr=true",
                                       "ppo.lr_final_fraction=0.1", "total_frames=1000"]))
@@ -296,7 +296,7 @@ def test_learning_rate_schedule():
 def test_entropy_bonus_schedule():
     """ppo.entropy_coeff 0.02 falling over 1000 frames to a quarter of it; constant by default;
     a final fraction outside [0, 1] is refused."""
-    from crllk.training.schedules import entropy_coeff
+    from crllk.algos.schedules import entropy_coeff
 
     config = validate(compose_config(["ppo.entropy_coeff=0.02", "total_frames=1000",
                                       "ppo.entropy_final_fraction=0.25"]))
@@ -438,8 +438,8 @@ def test_a_multirun_through_ray_runs_each_job_on_a_head_bound_to_127_0_0_1(tmp_p
 def test_a_map_file_run_is_named_after_its_file():
     """Evaluations and exported policies name a map file's run by the file, not by the
     default task the composition starts from."""
+    from crllk.config import validate
     from crllk.training.compose import compose_config
-    from crllk.training.config import validate
 
     path = str(Path(__file__).parent / "data/real_maps/duckietown-world/ETH_small_intersect.yaml")
     config = validate(compose_config([f"task={path}"]))

@@ -18,6 +18,7 @@ from tiny_runs import assert_same_runs, run_in_process
 
 from crllk import convert, evaluate
 from crllk.cli import exit_status
+from crllk.rl.plain import tensordict_from_plain, tensordict_to_plain
 from crllk.training.checkpoints import (
     CHECKPOINT_FORMAT,
     UnsafeFileError,
@@ -25,7 +26,6 @@ from crllk.training.checkpoints import (
     read_state,
     write_state,
 )
-from crllk.training.plain import tensordict_from_plain, tensordict_to_plain
 from crllk.training.runs import CHECKPOINT_FILE, POLICY_FILE
 
 REPO = Path(__file__).resolve().parents[1]

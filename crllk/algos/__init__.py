@@ -16,8 +16,8 @@ from functools import cache
 from hydra.core.config_store import ConfigStore
 
 from crllk.algos.base import Learner, TrainingEnv
+from crllk.config import SOURCE, TrainConfig
 from crllk.errors import ConfigError
-from crllk.training.config import SOURCE, TrainConfig
 
 __all__ = ["Learner", "build_learner", "learners", "register_options"]
 

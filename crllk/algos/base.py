@@ -14,10 +14,10 @@ from typing import Any, ClassVar, Protocol
 import torch
 from tensordict import TensorDictBase
 
+from crllk.config import TrainConfig
 from crllk.envs.distributed import RayLaneKeepingCollector
 from crllk.envs.parallel import LaneKeepingEnv
 from crllk.rl.sampling import ActionNoise
-from crllk.training.config import TrainConfig
 
 TrainingEnv = LaneKeepingEnv | RayLaneKeepingCollector
 """What a run collects from: simulations in this process or in workers, or remote collectors."""

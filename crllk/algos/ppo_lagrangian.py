@@ -5,7 +5,7 @@ the λ-combination of their advantages (:mod:`crllk.rl.lagrangian_advantage`), t
 passes of minibatch PPO (:class:`crllk.rl.loss.CriticsPPOLoss`), each network's gradient clipped
 on its own. The multipliers come from the trainer (learned by dual ascent or PID, or frozen at
 fixed weights); the learning rate, the entropy bonus and the teacher's imitation weight follow
-their schedules (:mod:`crllk.training.schedules`).
+their schedules (:mod:`crllk.algos.schedules`).
 """
 
 from __future__ import annotations
@@ -17,13 +17,13 @@ import torch
 from tensordict import TensorDictBase
 
 from crllk.algos.base import TrainingEnv
+from crllk.algos.schedules import entropy_coeff, imitation_coeff, learning_rate
+from crllk.config import TrainConfig
 from crllk.rl.lagrangian_advantage import LagrangianAdvantage
 from crllk.rl.loss import AdvantageModules, CriticsPPOLoss, make_advantage_modules
 from crllk.rl.models import make_actor, make_critic, make_shared_critic
 from crllk.rl.sampling import ActionNoise
 from crllk.tasks.lane_keeping import state_feature_names
-from crllk.training.config import TrainConfig
-from crllk.training.schedules import entropy_coeff, imitation_coeff, learning_rate
 
 
 class PPOLagrangian:

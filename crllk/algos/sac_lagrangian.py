@@ -32,15 +32,15 @@ from torch import nn
 from torchrl.objectives import DiscreteSACLoss, SACLoss, SoftUpdate, ValueEstimators
 
 from crllk.algos.base import TrainingEnv
+from crllk.config import SOURCE, TrainConfig
 from crllk.errors import ConfigError
 from crllk.rl.lagrangian_advantage import LagrangianAdvantage
 from crllk.rl.models import make_actor, make_encoder
+from crllk.rl.plain import tensordict_from_plain, tensordict_to_plain
 from crllk.rl.sampling import ActionNoise
 from crllk.settings import non_negative, open_unit_interval, parse, positive, setting, unit_interval
 from crllk.tasks.constraints import cost_key
 from crllk.tasks.lane_keeping import state_feature_names
-from crllk.training.config import SOURCE, TrainConfig
-from crllk.training.plain import tensordict_from_plain, tensordict_to_plain
 
 OPTIONS = "algo.options."
 PENALISED_REWARD = "penalised_reward"

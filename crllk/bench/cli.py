@@ -40,7 +40,7 @@ from crllk.tasks.config import load_task_config
 from crllk.tasks.randomization import PRESETS
 
 if TYPE_CHECKING:
-    from crllk.training.config import TrainConfig
+    from crllk.config import TrainConfig
 
 RANDOMIZED = {"randomize": "default"}
 """Task settings of the randomised figures, each measured against the same env without."""

@@ -24,12 +24,12 @@ from pathlib import Path
 import crllk  # noqa: F401  (headless GL before torchrl)
 from crllk.bench.training import bench_config
 from crllk.cli import Parser, positive_int, run
+from crllk.config import TrainConfig
 from crllk.envs.episodes import EpisodeAccumulator
 from crllk.recording.live import LiveView, live_url, server_sink
 from crllk.recording.recorder import record_episodes
 from crllk.recording.viewer import free_port, start_viewer, stop_viewer
 from crllk.training.build import Learner, build_env, build_run
-from crllk.training.config import TrainConfig
 from crllk.training.loop import episode_columns, learn
 
 _TARGET = 0.05

@@ -19,12 +19,12 @@ import torch
 from torchrl.envs.utils import ExplorationType, set_exploration_type
 
 import crllk  # noqa: F401  (headless GL before torchrl)
+from crllk.config import TrainConfig, validate
 from crllk.envs.batched import BatchedLaneKeepingEnv
 from crllk.envs.episodes import EpisodeAccumulator
 from crllk.envs.parallel import ParallelLaneKeepingEnv
 from crllk.training.build import build_run
 from crllk.training.compose import compose_config
-from crllk.training.config import TrainConfig, validate
 from crllk.training.loop import collect_batch, first_carry, learn
 from crllk.training.updates import shape_signals
 

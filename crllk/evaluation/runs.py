@@ -11,6 +11,7 @@ from typing import Any
 
 from omegaconf import OmegaConf
 
+from crllk.config import TrainConfig, algo_thresholds
 from crllk.envs.batched import make_env
 from crllk.envs.parallel import LaneKeepingEnv
 from crllk.errors import ConfigError
@@ -22,7 +23,6 @@ from crllk.rl.rollout import EvaluationResult, run_episodes
 from crllk.tasks.config import load_task_config
 from crllk.tasks.follower import FollowerGains, FollowerPolicy
 from crllk.training.build import build_env, build_eval_env
-from crllk.training.config import TrainConfig, algo_thresholds
 from crllk.training.run_dir import EVAL_RECORDING
 from crllk.training.runs import EVAL_FILE, load_actor, load_run_config
 

@@ -37,6 +37,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from crllk.cli import Parser
+from crllk.config import validate
 from crllk.errors import ConfigError
 from crllk.evaluation.robustness import conditions
 from crllk.experiments.aids import aids
@@ -64,7 +65,6 @@ from crllk.experiments.tables import settings_dict, table_markdown, write_table
 from crllk.experiments.teacher import teacher
 from crllk.files import atomic_write_text, write_problem
 from crllk.training.compose import compose_config
-from crllk.training.config import validate
 
 __all__ = ["AGENTS", "ALL", "EXPERIMENTS", "PAPER_TABLE1", "check_settings", "figure1", "main",
            "maps", "sweep", "sweep_markdown", "sweep_specs", "table1", "table_markdown"]

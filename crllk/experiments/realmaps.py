@@ -32,6 +32,7 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+from crllk.config import validate
 from crllk.evaluation.report import aggregate
 from crllk.experiments.runs import THRESHOLDS, Outcome, RunSpec, Settings, train_and_evaluate
 from crllk.experiments.seeds import SEED_OF_RUN, direction_cells, seed_cells
@@ -39,7 +40,6 @@ from crllk.experiments.tables import invocation, invocation_note, settings_dict
 from crllk.files import atomic_write_text
 from crllk.paths import SOURCE_ROOT
 from crllk.training.compose import compose_config
-from crllk.training.config import validate
 
 REALMAPS_AGENT = "CRLLK-D"
 REAL_MAPS_DIR = SOURCE_ROOT / "tests" / "data" / "real_maps" / "duckietown-world"

@@ -16,10 +16,10 @@ from typing import Any
 import torch
 from joblib import Parallel, delayed
 
+from crllk.config import algo_thresholds
 from crllk.evaluation.report import PAPER_CONSTRAINTS, format_summary
 from crllk.evaluation.runs import EVALUATION_ENVS, evaluate_run
 from crllk.protocol import TEST_EPISODES, TEST_EVALUATION, TEST_MODE_EVALUATION, TEST_SEED
-from crllk.training.config import algo_thresholds
 from crllk.training.runs import (
     EVAL_FILE,
     has_policy,

@@ -10,6 +10,7 @@ import torch
 import crllk  # noqa: F401  (chooses the headless GL backend before torchrl imports mujoco)
 from crllk.algos import Learner, build_learner
 from crllk.algos.base import TrainingEnv
+from crllk.config import CLUSTER_EXTRA, SOURCE, TrainConfig
 from crllk.envs.batched import BatchedLaneKeepingEnv, make_env, sub_env_seeds
 from crllk.envs.distributed import RayClusterError, RayLaneKeepingCollector
 from crllk.envs.parallel import LaneKeepingEnv, ParallelLaneKeepingEnv
@@ -17,7 +18,6 @@ from crllk.errors import ConfigError
 from crllk.rl.import_probes import settle_import_probes
 from crllk.rl.lagrange import Multiplier, make_multiplier
 from crllk.tasks.constraints import Constraint
-from crllk.training.config import CLUSTER_EXTRA, SOURCE, TrainConfig
 
 
 def build_env(config: TrainConfig, *, num_envs: int, seed: int,

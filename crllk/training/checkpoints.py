@@ -1,6 +1,6 @@
 """Checkpoints of training runs, written atomically and stamped with a format version.
 
-A checkpoint or kept policy holds tensors and plain containers only (:mod:`crllk.training.plain`)
+A checkpoint or kept policy holds tensors and plain containers only (:mod:`crllk.rl.plain`)
 and is read with ``torch.load(weights_only=True)``, so that reading a file cannot run code; a
 file that needs more (a checkpoint of an older format, or one crafted to run code) is refused,
 and ``python -m crllk.convert`` converts one the user trusts (:mod:`crllk.convert`).
@@ -18,13 +18,13 @@ import torch
 from omegaconf import OmegaConf
 from tensordict import TensorDictBase
 
+from crllk.config import TrainConfig
 from crllk.envs.episodes import EpisodeAccumulator
 from crllk.errors import ConfigError
 from crllk.files import atomic_write
 from crllk.rl.lagrange import Multiplier, multiplier_from_state
+from crllk.rl.plain import first_non_plain, tensordict_from_plain, tensordict_to_plain
 from crllk.training.build import Learner, TrainingEnv, keeps_snapshots
-from crllk.training.config import TrainConfig
-from crllk.training.plain import first_non_plain, tensordict_from_plain, tensordict_to_plain
 
 CHECKPOINT_FORMAT = 4
 """Version of the checkpoint layout written by :mod:`crllk.training.loop` (2: constraints by

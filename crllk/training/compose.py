@@ -1,6 +1,6 @@
 """The trainer's Hydra configuration: the schema and the task group, composed from overrides.
 
-:func:`register` stores :class:`~crllk.training.config.TrainConfig` as the schema of
+:func:`register` stores :class:`~crllk.config.TrainConfig` as the schema of
 ``crllk/conf/train.yaml`` and every ``tasks/<name>.yaml`` as a choice of the ``task`` group.
 :func:`compose_config` composes like ``python -m crllk.train`` and turns Hydra's own error text
 into one :class:`~crllk.errors.ConfigError` line naming the field and, for a group, its choices.
@@ -19,9 +19,9 @@ from omegaconf import DictConfig
 from omegaconf.errors import OmegaConfBaseException
 
 from crllk.algos import register_options
+from crllk.config import CLUSTER_EXTRA, SOURCE, register_schema
 from crllk.errors import ConfigError
 from crllk.paths import task_file, task_names
-from crllk.training.config import CLUSTER_EXTRA, SOURCE, register_schema
 from crllk.yaml_files import read_yaml
 
 CONFIG_MODULE = "crllk.conf"

@@ -14,9 +14,9 @@ import torch
 from tensordict import TensorDictBase
 
 import crllk  # noqa: F401  (chooses the headless GL backend before torchrl imports mujoco)
+from crllk.config import TrainConfig
 from crllk.files import atomic_write_text, open_no_follow, read_csv_rows, writing
 from crllk.tasks.constraints import Constraint
-from crllk.training.config import TrainConfig
 
 DISCRETE_ACTION_NAMES = ("left", "right", "straight")
 

@@ -36,6 +36,7 @@ from tensordict import TensorDictBase
 from tqdm import tqdm
 
 import crllk  # noqa: F401  (chooses the headless GL backend before torchrl imports mujoco)
+from crllk.config import TrainConfig
 from crllk.envs.batched import BatchedLaneKeepingEnv
 from crllk.envs.distributed import RayLaneKeepingCollector
 from crllk.envs.episodes import EpisodeAccumulator, EpisodeStats, summarise
@@ -58,7 +59,6 @@ from crllk.training.checkpoints import (
     resumed_carry,
     save_checkpoint,
 )
-from crllk.training.config import TrainConfig
 from crllk.training.logs import (
     CsvLog,
     action_columns,

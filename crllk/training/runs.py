@@ -20,6 +20,7 @@ import torch
 from omegaconf import OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
+from crllk.config import TrainConfig, upgrade, validate
 from crllk.errors import ConfigError
 from crllk.files import read_csv_rows
 from crllk.training.checkpoints import (
@@ -29,7 +30,6 @@ from crllk.training.checkpoints import (
     policy_state,
     save_checkpoint,
 )
-from crllk.training.config import TrainConfig, upgrade, validate
 
 CONFIG_FILE = "config.yaml"
 CHECKPOINT_FILE = Path("checkpoints") / "last.pt"

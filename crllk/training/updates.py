@@ -8,10 +8,10 @@ import torch
 from tensordict import TensorDictBase
 
 import crllk  # noqa: F401  (chooses the headless GL backend before torchrl imports mujoco)
+from crllk.config import TrainConfig
 from crllk.envs.episodes import EpisodeStats
 from crllk.rl.lagrange import Multiplier
 from crllk.tasks.config import TaskConfig
-from crllk.training.config import TrainConfig
 
 
 def shape_signals(batch: TensorDictBase, config: TrainConfig, task: TaskConfig) -> None:

@@ -38,7 +38,7 @@ SOURCE = "override"
 """How errors name where a bad value came from (the command line or the configuration)."""
 SCHEMA_NAME = "train_schema"
 """The name under which :class:`TrainConfig` is stored in Hydra's ConfigStore."""
-CONF_DIR = Path(__file__).resolve().parent.parent / "conf"
+CONF_DIR = Path(__file__).resolve().parent / "conf"
 CLUSTER_EXTRA = "the cluster extra: pip install -e '.[cluster]'"
 """What installs Ray and the cluster launchers."""
 

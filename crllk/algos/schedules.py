@@ -4,7 +4,7 @@ bonus."""
 from __future__ import annotations
 
 import crllk  # noqa: F401  (chooses the headless GL backend before torchrl imports mujoco)
-from crllk.training.config import TrainConfig
+from crllk.config import TrainConfig
 
 
 def _linear(start: float, end: float, frames: int, over_frames: int) -> float:
