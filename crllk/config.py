@@ -76,12 +76,16 @@ class ConstraintConfig:
         return self.threshold if self.target is None else self.target
 
 
+DEFAULT_LEARNER = "ppo_lagrangian"
+"""The paper's learner (:mod:`crllk.algos.ppo_lagrangian`)."""
+
+
 @dataclass
 class AlgoConfig:
     """The learner (``algo=crllk``: learned multipliers; ``algo=ppo``: fixed weights)."""
 
     name: str = setting(check=one_of("crllk", "ppo"))
-    learner: str = "ppo_lagrangian"
+    learner: str = DEFAULT_LEARNER
     """The learning algorithm, a module of :mod:`crllk.algos` (checked when the run is built)."""
     options: dict[str, Any] = field(default_factory=dict)
     """The learner's own settings, checked by its module (``algo.options.<name>``)."""
@@ -295,9 +299,11 @@ class TrainConfig:
         return {k: v for k, v in self.task.items() if k not in ("name", "map")}
 
     def default_run_dir(self) -> Path:
-        stem = self.task_name
-        return Path.cwd() / "runs" / stem / (
-            f"{self.algo.name}-{self.action.name}-{self.obs.name}-seed{self.seed}")
+        """``runs/<task>/<algo>[-<learner>]-<action>-<obs>-seed<seed>``: the learner is named
+        when it is not the default, so runs of two learners never share a folder."""
+        learner = "" if self.algo.learner == DEFAULT_LEARNER else f"-{self.algo.learner}"
+        return Path.cwd() / "runs" / self.task_name / (
+            f"{self.algo.name}{learner}-{self.action.name}-{self.obs.name}-seed{self.seed}")
 
     def resolved_run_dir(self) -> Path:
         return Path(self.run_dir).expanduser().resolve() if self.run_dir else self.default_run_dir()
@@ -314,8 +320,8 @@ def validate(cfg: DictConfig | dict[str, Any]) -> TrainConfig:
     Raises:
         ConfigError: naming the first field that is missing, of the wrong type or out of range.
     """
-    if isinstance(cfg, DictConfig):  # a learner's typed options (algo/options) as plain values:
-        cfg = OmegaConf.to_container(cfg)  # its own module checks them
+    if isinstance(cfg, DictConfig):  # plain values: a learner's options are checked by its
+        cfg = OmegaConf.to_container(cfg)  # own module (crllk.algos)
     return parse(TrainConfig, cfg, SOURCE)
 
 

@@ -12,7 +12,7 @@ from typing import Any, ClassVar
 import pytest
 import torch
 from tensordict import TensorDictBase
-from tiny_runs import assert_same_runs, read_rows, run_in_process
+from tiny_runs import ROUNDING, assert_same_runs, read_rows, run_in_process
 
 from crllk import algos
 from crllk.algos.ppo_lagrangian import PPOLagrangian
@@ -58,7 +58,8 @@ def test_ppo_lagrangian_reproduces_the_trainer_before_the_seam(tmp_path, agent):
         assert set(expected) <= set(row)
         for key, value in expected.items():
             a, b = float(row[key]), float(value)
-            assert (math.isnan(a) and math.isnan(b)) or a == pytest.approx(b, rel=1e-4, abs=1e-6), \
+            close = a == pytest.approx(b, rel=ROUNDING["rtol"], abs=ROUNDING["atol"])
+            assert (math.isnan(a) and math.isnan(b)) or close, \
                 (row["iteration"], key, row[key], value)
 
 

@@ -90,6 +90,10 @@ def test_the_ring_overwrites_the_oldest_and_samples_what_it_holds():
     ("obs=pixels", "override: obs: sac_lagrangian learns from state (obs=state): a replay "
                    "buffer of camera images would not fit a checkpoint"),
     ("algo.options.gamma=1.5", "override: algo.options.gamma: must lie in [0, 1], got 1.5"),
+    ("algo.options.buffer_frames=16", "override: algo.options.buffer_frames: must hold "
+                                      "warmup_frames (32) and batch_size (8), got 16"),
+    ("model.policy_commands=true", "override: model.policy_commands: sac_lagrangian's policy "
+                                   "reads the state alone; set model.policy_commands=false"),
     ("algo.options.gama=0.9", "override: algo.options.gama: no such setting (python -m "
                               "crllk.train --cfg job lists them all)"),
 ])
@@ -97,3 +101,23 @@ def test_what_it_cannot_do_is_one_line(tmp_path, override, message):
     with pytest.raises(ConfigError) as error:
         run_in_process(tmp_path / "run", 1, [*SAC, override])
     assert str(error.value) == message
+
+
+def test_its_runs_have_a_folder_of_their_own():
+    """The default run directory names the learner when it is not the paper's, so a SAC run
+    never resumes (or refuses) a PPO run of the same task, action, observation and seed."""
+    from crllk.config import validate
+    from crllk.training.compose import compose_config
+
+    sac = validate(compose_config(["algo=sac_lagrangian", "obs=state"])).default_run_dir()
+    ppo = validate(compose_config(["obs=state"])).default_run_dir()
+    assert sac.name == "crllk-sac_lagrangian-discrete-state-seed0"
+    assert ppo.name == "crllk-discrete-state-seed0"
+
+
+def test_a_buffer_smaller_than_one_iteration_is_refused(tmp_path):
+    with pytest.raises(ConfigError) as error:
+        run_in_process(tmp_path / "run", 1, [*SAC, "algo.options.buffer_frames=12",
+                                             "algo.options.warmup_frames=8"])
+    assert str(error.value) == ("override: algo.options.buffer_frames: must hold one "
+                                "iteration's 16 frames (num_envs × rollout_steps), got 12")

@@ -1,10 +1,10 @@
 """Learning algorithms, one module each, behind one interface (:class:`crllk.algos.base.Learner`).
 
-A module of this package that defines ``LEARNER`` (a class with ``name``, ``Settings`` and
-``build``) is a learner; ``algo.learner=<name>`` selects it, and its settings dataclass becomes
-the ``algo/options=<name>`` Hydra choice (:func:`register_options`), so that its defaults are
-written once, in the dataclass. Adding one is its module, its configuration file and its test:
-nothing else in the package names a learner.
+A module of this package that defines ``LEARNER`` (a class with ``name`` and ``build``) is a
+learner; ``algo.learner=<name>`` selects it, and its own settings are ``algo.options.*``, their
+values in its configuration file (``crllk/conf/algo/<name>.yaml``), checked by its module when
+the run is built (so composing a command's configuration imports no learner). Adding one is its
+module, its configuration file and its test: nothing else in the package names a learner.
 """
 
 from __future__ import annotations
@@ -13,13 +13,11 @@ import importlib
 import pkgutil
 from functools import cache
 
-from hydra.core.config_store import ConfigStore
-
 from crllk.algos.base import Learner, TrainingEnv
 from crllk.config import SOURCE, TrainConfig
 from crllk.errors import ConfigError
 
-__all__ = ["Learner", "build_learner", "learners", "register_options"]
+__all__ = ["Learner", "build_learner", "learners"]
 
 
 @cache
@@ -31,13 +29,6 @@ def learners() -> dict[str, type[Learner]]:
         if learner is not None:
             found[learner.name] = learner
     return found
-
-
-def register_options(store: ConfigStore) -> None:
-    """Every learner's settings as a choice of the ``algo/options`` group."""
-    for name, learner in learners().items():
-        if getattr(learner, "Settings", None) is not None:
-            store.store(group="algo/options", name=name, node=learner.Settings)
 
 
 def build_learner(config: TrainConfig, env: TrainingEnv) -> Learner:

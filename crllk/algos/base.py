@@ -28,9 +28,6 @@ class Learner(Protocol):
 
     name: ClassVar[str]
     """The ``algo.learner`` value that selects it."""
-    Settings: ClassVar[type | None]
-    """Its own settings (a settings dataclass, :mod:`crllk.settings`): ``algo.options.*``,
-    composed as the ``algo/options=<name>`` Hydra choice; None when it has none."""
     actor: torch.nn.Module
     """The stochastic policy that collects, is evaluated and is exported."""
     action_noise: ActionNoise

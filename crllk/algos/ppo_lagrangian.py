@@ -31,7 +31,6 @@ class PPOLagrangian:
     loss and its Adam optimiser (see the module's docs)."""
 
     name: ClassVar[str] = "ppo_lagrangian"
-    Settings: ClassVar[type | None] = None  # its settings are still the trainer's ppo.*
 
     def __init__(self, config: TrainConfig, actor: torch.nn.Module,
                  critics: dict[str, torch.nn.Module], cost_names: list[str]) -> None:
@@ -84,11 +83,6 @@ class PPOLagrangian:
     @property
     def diagnostic_names(self) -> list[str]:
         return self.loss.out_keys
-
-    @property
-    def multipliers(self) -> dict[str, float]:
-        """The λ the next update combines the advantages with."""
-        return self.combination.multipliers
 
     def prepare(self, frames: int, multipliers: Mapping[str, float]) -> None:
         self.combination.set_multipliers(multipliers)

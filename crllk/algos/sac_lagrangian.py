@@ -15,7 +15,8 @@ PPO-Lagrangian.
 From state only (``obs=state``): a buffer of camera images at this size (200,000 frames of
 30×40×3) would hold 720 MB and go into every checkpoint.
 
-Its settings are ``algo.options.*`` (:class:`SACSettings`).
+Its settings are ``algo.options.*`` (:class:`SACSettings`, their values in
+``crllk/conf/algo/sac_lagrangian.yaml``).
 """
 
 from __future__ import annotations
@@ -49,29 +50,38 @@ PENALISED_REWARD = "penalised_reward"
 
 @dataclass
 class SACSettings:
-    """SAC-Lagrangian's settings (``algo.options.<name>``)."""
+    """SAC-Lagrangian's settings (``algo.options.<name>``); their values are in
+    ``crllk/conf/algo/sac_lagrangian.yaml``, so that composing a command's configuration does
+    not import the learners."""
 
-    gamma: float = setting(0.97, check=unit_interval)
+    def problems(self) -> list[tuple[str, str]]:
+        if self.buffer_frames < max(self.warmup_frames, self.batch_size):
+            return [("buffer_frames", f"must hold warmup_frames ({self.warmup_frames}) and "
+                     f"batch_size ({self.batch_size}), got {self.buffer_frames}")]
+        return []
+
+    gamma: float = setting(check=unit_interval)
     """Discount of the soft Q-values."""
-    lr: float = setting(3e-4, check=positive)
+    lr: float = setting(check=positive)
     """Adam's learning rate, for the policy, the Q-networks and the temperature."""
-    batch_size: int = setting(256, check=positive)
+    batch_size: int = setting(check=positive)
     """Transitions per gradient step."""
-    buffer_frames: int = setting(200_000, check=positive)
+    buffer_frames: int = setting(check=positive)
     """Replay capacity (frames); the oldest are overwritten."""
-    warmup_frames: int = setting(5_000, check=non_negative)
+    warmup_frames: int = setting(check=non_negative)
     """No gradient step until the buffer holds this many frames."""
-    updates_per_frame: float = setting(0.125, check=positive)
+    updates_per_frame: float = setting(check=positive)
     """Gradient steps per collected frame (0.125: 128 per iteration of 1,024 frames)."""
-    tau: float = setting(0.005, check=open_unit_interval)
+    tau: float = setting(check=open_unit_interval)
     """Polyak step of the target Q-networks."""
-    alpha_init: float = setting(0.2, check=positive)
+    alpha_init: float = setting(check=positive)
     """Initial entropy temperature."""
-    target_entropy_fraction: float = setting(0.5, check=open_unit_interval)
+    target_entropy_fraction: float = setting(check=open_unit_interval)
     """Discrete actions: the target entropy as a fraction of the uniform policy's (log of the
     number of actions); continuous: −(action dimensions)."""
-    max_grad_norm: float = setting(10.0, check=positive)
-    """Each gradient step's norm is clipped to this."""
+    max_grad_norm: float = setting(check=positive)
+    """The gradient norms of the policy, of the Q-networks and of the temperature are each
+    clipped to this."""
 
 
 class QNetwork(nn.Module):
@@ -129,7 +139,6 @@ class SACLagrangian:
     replay buffer (see the module's docs)."""
 
     name: ClassVar[str] = "sac_lagrangian"
-    Settings: ClassVar[type] = SACSettings
     LOSS_NAMES: ClassVar[tuple[str, ...]] = ("loss_actor", "loss_qvalue", "loss_alpha")
 
     def __init__(self, config: TrainConfig, settings: SACSettings, actor: nn.Module,
@@ -140,6 +149,11 @@ class SACLagrangian:
         loss.set_keys(reward=PENALISED_REWARD)
         self.target = SoftUpdate(loss, tau=settings.tau)
         self.optimizer = torch.optim.Adam(loss.parameters(), lr=settings.lr)
+        actor_ids = {id(p) for p in actor.parameters()}
+        rest = [p for p in loss.parameters() if id(p) not in actor_ids]
+        self._gradient_groups = [list(actor.parameters()),
+                                 [p for p in rest if p is not loss.log_alpha],
+                                 [loss.log_alpha]]
         self.combination = LagrangianAdvantage(
             cost_names, reward_key=("next", "reward"), out_key=("next", PENALISED_REWARD),
             cost_keys={c: ("next", cost_key(c)) for c in cost_names})
@@ -156,10 +170,18 @@ class SACLagrangian:
         Raises:
             ConfigError: for ``obs=pixels``, or settings out of range.
         """
-        settings = parse(cls.Settings, config.algo.options, SOURCE, OPTIONS)
+        settings = parse(SACSettings, config.algo.options, SOURCE, OPTIONS)
         if config.obs.name != "state":
             raise ConfigError(SOURCE, "obs", f"{cls.name} learns from state (obs=state): a "
                               "replay buffer of camera images would not fit a checkpoint")
+        if config.model.policy_commands:
+            raise ConfigError(SOURCE, "model.policy_commands", f"{cls.name}'s policy reads "
+                              "the state alone; set model.policy_commands=false")
+        frames = config.num_envs * config.rollout_steps
+        if settings.buffer_frames < frames:
+            raise ConfigError(SOURCE, "algo.options.buffer_frames", f"must hold one "
+                              f"iteration's {frames} frames (num_envs × rollout_steps), got "
+                              f"{settings.buffer_frames}")
         model, names = config.model, state_feature_names(env.config)
         shape = env.observation_spec["state"].shape[1:]
         actor = make_actor("state", shape, config.action.name, env.action_spec, model, names)
@@ -207,14 +229,15 @@ class SACLagrangian:
         if self.buffer.size >= max(self.settings.warmup_frames, self.settings.batch_size):
             self._carry += self.settings.updates_per_frame * flat.shape[0]
             steps, self._carry = int(self._carry), self._carry - int(self._carry)
-        parameters = [p for group in self.optimizer.param_groups for p in group["params"]]
         for _ in range(steps):
             sample = self.combination(self.buffer.sample(self.settings.batch_size, generator))
             out = self.loss(sample)
             total = sum(out[name] for name in self.LOSS_NAMES)
             self.optimizer.zero_grad(set_to_none=True)
             total.backward()
-            torch.nn.utils.clip_grad_norm_(parameters, self.settings.max_grad_norm)
+            for group in self._gradient_groups:  # each on its own: large Q errors do not
+                torch.nn.utils.clip_grad_norm_(group, self.settings.max_grad_norm)  # shrink
+            # the policy's step
             self.optimizer.step()
             self.target.step()
             for name in ("loss_actor", "loss_qvalue", "loss_alpha", "alpha", "entropy"):

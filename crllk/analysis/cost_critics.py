@@ -51,11 +51,11 @@ def cost_critic_fit(run_dir: Path, batches: int, constraint: str) -> dict[str, A
         if constraint not in names:
             raise ConfigError(SOURCE, "--constraint",
                               f"{constraint!r} is not a constraint of the run ({names})")
-        restore(load_checkpoint(checkpoint, resuming=True), learner, multipliers,
-                EpisodeAccumulator(config.num_envs, env.constraints), env, generator)
         if not isinstance(learner, PPOLagrangian):
             raise ConfigError(SOURCE, "run", f"the run's learner {learner.name!r} has no GAE "
                               "cost critics to analyse")
+        restore(load_checkpoint(checkpoint, resuming=True), learner, multipliers,
+                EpisodeAccumulator(config.num_envs, env.constraints), env, generator)
         cost_key = env.constraints[names.index(constraint)].cost_key
         target_key, value_key = learner.loss.cost_keys(constraint)
         carry = first_carry(env)

@@ -143,8 +143,8 @@ says what to do, not how sure the policy should be, and its corrections at the e
         self._take_keys_from_networks()
 
     def set_keys(self, **kwargs: NestedKey) -> None:
-        """TorchRL's ``set_keys``, which also takes the per-cost fields ``advantage_<cost>``,
-        ``value_target_<cost>`` and ``value_<cost>``; an unknown field raises ValueError."""
+        """TorchRL's ``set_keys``, which also takes the per-cost fields ``value_target_<cost>``
+        and ``value_<cost>``; an unknown field raises ValueError."""
         for name in [k for k in kwargs if k in self._cost_tensor_keys]:
             self._cost_tensor_keys[name] = kwargs.pop(name)
         if kwargs:

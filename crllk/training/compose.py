@@ -18,7 +18,6 @@ from hydra.errors import HydraException
 from omegaconf import DictConfig
 from omegaconf.errors import OmegaConfBaseException
 
-from crllk.algos import register_options
 from crllk.config import CLUSTER_EXTRA, SOURCE, register_schema
 from crllk.errors import ConfigError
 from crllk.paths import task_file, task_names
@@ -32,11 +31,9 @@ GROUPS = {"task": "tasks/*.yaml", "algo": "crllk/conf/algo", "action": "crllk/co
 
 
 def register(store: ConfigStore | None = None, names: Iterable[str] | None = None) -> None:
-    """Stores the schema, the learners' settings (:func:`crllk.algos.register_options`) and
-    makes every ``tasks/<name>.yaml`` a choice of ``task``."""
+    """Stores the schema and makes every ``tasks/<name>.yaml`` a choice of ``task``."""
     store = ConfigStore.instance() if store is None else store
     register_schema(store)
-    register_options(store)
     for name in task_names() if names is None else names:
         data = read_yaml(task_file(name))
         node = dict(data) if isinstance(data, dict) else {}
