@@ -15,7 +15,7 @@ TRAIN_ARGS ?=
 # pytest workers for `make test` (pytest-xdist; `auto` is one per core)
 TEST_JOBS ?= auto
 
-.PHONY: install install-cluster train demo test test-slow lint pictures viewer-pictures clean
+.PHONY: install install-cluster peers train demo test test-slow lint pictures viewer-pictures clean
 
 install: $(STAMP)
 
@@ -34,6 +34,20 @@ $(CLUSTER_STAMP): $(STAMP)
 	$(PY) -m pip install -q -e ".[dev,cluster]" 2>&1 | grep -v -e "is ignored" -e "Warning" -e "!!" -e "\*\*\*" || true
 	$(PY) -c "import hydra_plugins.hydra_ray_launcher, hydra_plugins.hydra_submitit_launcher, ray"
 	touch $(CLUSTER_STAMP)
+
+# OmniSafe (a peer library: python -m crllk.experiments peers --obs state) in its own Python
+# 3.10 environment, .venv-omnisafe (its pins cannot share .venv; about 5 GB with torch's CUDA build)
+PEERS_PYTHON ?= python3.10
+PEERS_VENV := .venv-omnisafe
+PEERS_STAMP := $(PEERS_VENV)/.installed
+
+peers: $(PEERS_STAMP)
+
+$(PEERS_STAMP): peers/omnisafe/requirements.txt $(STAMP)
+	test -x $(PEERS_VENV)/bin/python || $(PEERS_PYTHON) -m venv $(PEERS_VENV)
+	$(PEERS_VENV)/bin/python -m pip install -q -r peers/omnisafe/requirements.txt 2>&1 | grep -v "is ignored" || true
+	$(PEERS_VENV)/bin/python -c "import omnisafe"
+	touch $(PEERS_STAMP)
 
 train: $(STAMP)
 	$(PY) -m crllk.train resume=true $(TRAIN_ARGS)

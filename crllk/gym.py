@@ -25,6 +25,7 @@ import numpy as np
 from gymnasium import spaces
 
 from crllk.paths import task_names
+from crllk.tasks.config import TaskConfig
 from crllk.tasks.constraints import cost_key
 from crllk.tasks.lane_keeping import load
 
@@ -60,6 +61,11 @@ class LaneKeepingEnv(gymnasium.Env):
             self.action_space = spaces.Discrete(3)
         else:
             self.action_space = spaces.Box(-1.0, 1.0, (2,), np.float32)
+
+    @property
+    def task_config(self) -> TaskConfig:
+        """The task's settings (its map, constraints, horizon, ...)."""
+        return self._env.task.config
 
     def reset(self, *, seed: int | None = None,
               options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict[str, Any]]:

@@ -27,7 +27,7 @@ LAYERS = (
     ("crllk.analysis", "crllk.deployment"),
     ("crllk.train", "crllk.evaluate", "crllk.record", "crllk.experiments", "crllk.pictures",
      "crllk.screenshots", "crllk.demo", "crllk.bench", "crllk.export", "crllk.deploy",
-     "crllk.convert"),
+     "crllk.convert", "crllk.peers"),
 )
 """Bottom to top, in the order data flows: maps, MuJoCo, dm-control tasks, TorchRL
 environments, learning (and a run's settings), recording, the learners, the trainer, evaluation

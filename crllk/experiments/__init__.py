@@ -8,6 +8,7 @@
     python -m crllk.experiments teacher   # CRLLK-D with the teacher's floor, annealed, none
     python -m crllk.experiments aids      # CRLLK-D without encounter spawns, pixel critics
     python -m crllk.experiments realmaps  # CRLLK-D on two real Duckietown maps nobody tuned on
+    python -m crllk.experiments peers --obs state  # crllk's learners beside OmniSafe's
     python -m crllk.experiments all       # table1, maps and figure1
 
 Every experiment trains its runs as trainer multiruns (``python -m crllk.train -m
@@ -42,6 +43,7 @@ from crllk.errors import ConfigError
 from crllk.evaluation.robustness import conditions
 from crllk.experiments.aids import aids
 from crllk.experiments.figure1 import figure1_markdown
+from crllk.experiments.peers import peers
 from crllk.experiments.realmaps import realmaps
 from crllk.experiments.robustness import robustness
 from crllk.experiments.runs import (
@@ -115,7 +117,7 @@ def figure1(settings: Settings) -> list[Path]:
 
 EXPERIMENTS = {"table1": table1, "maps": maps, "figure1": figure1, "sweep": sweep,
                "robustness": robustness, "teacher": teacher, "aids": aids,
-               "realmaps": realmaps}
+               "realmaps": realmaps, "peers": peers}
 ALL = ("table1", "maps", "figure1")
 """What ``all`` runs (the sweep is asked for by name)."""
 

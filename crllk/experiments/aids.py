@@ -14,7 +14,6 @@ Markdown) is shared with :mod:`crllk.experiments.teacher`."""
 
 from __future__ import annotations
 
-import json
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -23,8 +22,7 @@ from typing import Any
 from crllk.evaluation.report import aggregate
 from crllk.experiments.runs import THRESHOLDS, Outcome, RunSpec, Settings, train_and_evaluate
 from crllk.experiments.seeds import PER_SEED_METRICS, SEED_OF_RUN, direction_cells, seed_cells
-from crllk.experiments.tables import invocation, invocation_note, settings_dict
-from crllk.files import atomic_write_text
+from crllk.experiments.tables import invocation, invocation_note, settings_dict, write_documents
 
 
 @dataclass(frozen=True)
@@ -76,13 +74,8 @@ class Ablation:
         """Trains what is missing, evaluates on the test seed, writes the documents."""
         outcome = train_and_evaluate(self.specs(settings), settings)
         document = self.document(outcome, settings)
-        settings.results.mkdir(parents=True, exist_ok=True)
-        json_path = atomic_write_text(settings.results / f"{self.name}.json",
-                                      json.dumps(document, indent=1) + "\n")
-        markdown = ablation_markdown(document, self.label)
-        md_path = atomic_write_text(settings.results / f"{self.name}.md", markdown)
-        print(markdown, flush=True)
-        return [json_path, md_path]
+        return write_documents(settings, self.name, document,
+                               ablation_markdown(document, self.label))
 
     def document(self, outcome: Outcome, settings: Settings) -> dict[str, Any]:
         """Per map and variant: the aggregate across seeds of the sampled policy and of the

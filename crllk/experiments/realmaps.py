@@ -27,7 +27,6 @@ single loop, so their evaluations have no start directions.
 
 from __future__ import annotations
 
-import json
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -36,8 +35,7 @@ from crllk.config import validate
 from crllk.evaluation.report import aggregate
 from crllk.experiments.runs import THRESHOLDS, Outcome, RunSpec, Settings, train_and_evaluate
 from crllk.experiments.seeds import SEED_OF_RUN, direction_cells, seed_cells
-from crllk.experiments.tables import invocation, invocation_note, settings_dict
-from crllk.files import atomic_write_text
+from crllk.experiments.tables import invocation, invocation_note, settings_dict, write_documents
 from crllk.paths import SOURCE_ROOT
 from crllk.training.compose import compose_config
 
@@ -90,13 +88,7 @@ def realmaps(settings: Settings) -> list[Path]:
     check_map_runs(specs, settings)
     outcome = train_and_evaluate(specs, settings)
     document = realmaps_document(outcome, settings)
-    settings.results.mkdir(parents=True, exist_ok=True)
-    json_path = atomic_write_text(settings.results / "realmaps.json",
-                                  json.dumps(document, indent=1) + "\n")
-    markdown = realmaps_markdown(document)
-    md_path = atomic_write_text(settings.results / "realmaps.md", markdown)
-    print(markdown, flush=True)
-    return [json_path, md_path]
+    return write_documents(settings, "realmaps", document, realmaps_markdown(document))
 
 
 def _entry(documents: Sequence[Mapping[str, Any]]) -> dict[str, Any]:

@@ -235,6 +235,18 @@ def seeds_text(settings: dict[str, Any], agents: Sequence[str]) -> str:
             "(fixed-weight baselines)")
 
 
+def write_documents(settings: Settings, name: str, document: dict[str, Any],
+                    markdown: str) -> list[Path]:
+    """Writes an experiment's ``<results>/<name>.json`` and ``<name>.md`` (printing the
+    Markdown); returns both paths."""
+    settings.results.mkdir(parents=True, exist_ok=True)
+    json_path = atomic_write_text(settings.results / f"{name}.json",
+                                  json.dumps(document, indent=1) + "\n")
+    md_path = atomic_write_text(settings.results / f"{name}.md", markdown)
+    print(markdown, flush=True)
+    return [json_path, md_path]
+
+
 def invocation(outcome: Outcome) -> dict[str, Any]:
     """What the invocation did, for its document: wall time (s), runs, and how many of them
     it trained and evaluated."""
