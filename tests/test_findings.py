@@ -6,6 +6,7 @@ import json
 from pathlib import Path
 
 import pytest
+from docs_pages import prose
 
 REPO = Path(__file__).resolve().parents[1]
 FINDINGS = (REPO / "docs/findings.md").read_text()
@@ -88,8 +89,9 @@ def test_the_collision_critic_traces_are_the_runs():
     assert ", ".join(logged[:2]) + " and " + logged[2] in " ".join(FINDINGS.split())
 
 
-def test_the_readme_s_training_aids_quote_the_runs():
-    readme = " ".join((REPO / "README.md").read_text().split())
+@pytest.mark.parametrize("where", ["README.md", "index.md"])
+def test_in_short_s_training_aids_quote_the_runs(where):
+    readme = prose(where)
     root = REPO / "results/runs/pixels/obstacle_loop"
     final = sorted(json.loads((root / f"CRLLK-D-teacher0-a0.5-seed{s}" / "eval.json").read_text())
                    ["summary"]["J_coll"] for s in (0, 1))
@@ -146,8 +148,9 @@ def test_the_teacher_test_modes_quoted_are_the_table_s():
     assert (f"floor {floor[0]} and {floor[1]}, no teacher {none[0]} and {none[1]})") in text
 
 
-def test_the_readme_quotes_what_the_teacher_s_floor_buys():
-    readme = " ".join((REPO / "README.md").read_text().split())
+@pytest.mark.parametrize("where", ["README.md", "index.md"])
+def test_in_short_quotes_what_the_teacher_s_floor_buys(where):
+    readme = prose(where)
 
     def worst_mode(variant: str) -> float:
         return max(json.loads((REPO / f"results/runs/pixels/{task}/CRLLK-D{variant}-a0.5-seed{s}"
@@ -159,10 +162,10 @@ def test_the_readme_quotes_what_the_teacher_s_floor_buys():
     assert round(100 * worst_mode("")) == 1
 
 
-def test_the_readme_s_figure1_numbers_are_figure1_json():
+def test_the_figure1_page_s_numbers_are_figure1_json():
     """Each threshold's mean J_clane and J_R, its final λ_lane per seed and its mode's J_clane,
-    as the README quotes them."""
-    readme = " ".join((REPO / "README.md").read_text().split())
+    as the site's Figure 1 page quotes them."""
+    readme = prose("results/figure1.md")
     figure = json.loads((REPO / "results/pixels/figure1.json").read_text())
     parts, modes = [], []
     for threshold, entry in figure["thresholds"].items():
@@ -176,7 +179,7 @@ def test_the_readme_s_figure1_numbers_are_figure1_json():
     assert f"J_clane {', '.join(modes[:-1])} and {modes[-1]} dm" in readme
 
 
-def test_the_readme_s_distance_to_the_best_fixed_pair_is_the_sweep_s():
+def test_the_figure1_page_s_distance_to_the_best_fixed_pair_is_the_sweep_s():
     from crllk.experiments.figure1 import best_fixed_pair
 
     figure = json.loads((REPO / "results/pixels/figure1.json").read_text())
@@ -187,7 +190,7 @@ def test_the_readme_s_distance_to_the_best_fixed_pair_is_the_sweep_s():
         best = best_fixed_pair(fixed, float(threshold), sweep["thresholds"]["collision"])
         travel = sum(e["J_R"] for e in entry["evaluations"]) / len(entry["evaluations"])
         gaps.append(abs(travel - best["J_R"]["mean"]))
-    assert f"within {max(gaps) + 0.005:.2f} m" in (REPO / "README.md").read_text()
+    assert f"within {max(gaps) + 0.005:.2f} m" in prose("results/figure1.md")
 
 
 def _test_document(task: str, agent: str, seed: int, name: str = "test") -> dict:
@@ -198,12 +201,14 @@ def _test_document(task: str, agent: str, seed: int, name: str = "test") -> dict
 CRLLK_SEEDS = {"CRLLK-D": (0, 1, 2), "CRLLK-C": (0, 1, 2)}
 
 
-def test_the_readme_s_obstacle_loop_figures_are_the_test_evaluations():
-    """The prose of "In short" and of the results from the camera: the sampled CRLLK-D's and
-    PPO-D's J_coll, the final λ_coll, the collisions with the curve duckie among all of the
-    CRLLK runs' test collisions, and J_clane in the blocked direction, from the runs'
-    ``test.json`` and ``test-mode.json``; the teacher said never to collide does not."""
+def test_the_obstacle_loop_figures_are_the_test_evaluations():
+    """The prose of "In short" (the README, and the site's home page that includes it) and of
+    the site's results from the camera: the sampled CRLLK-D's and PPO-D's J_coll, the final
+    λ_coll, the collisions with the curve duckie among all of the CRLLK runs' test collisions,
+    and J_clane in the blocked direction, from the runs' ``test.json`` and ``test-mode.json``;
+    the teacher said never to collide does not."""
     readme = " ".join((REPO / "README.md").read_text().split())
+    home, camera = prose("index.md"), prose("results/camera.md")
     crllk = [_test_document("obstacle_loop", "CRLLK-D", s)["summary"]["J_coll"] for s in (0, 1, 2)]
     ppo = [_test_document("obstacle_loop", "PPO-D", s)["summary"]["J_coll"] for s in (0, 1)]
     lam = [_test_document("obstacle_loop", "CRLLK-D", s)["source"]["multipliers"]["collision"]
@@ -218,15 +223,17 @@ def test_the_readme_s_obstacle_loop_figures_are_the_test_evaluations():
                 total += sum(objects.values())
                 hits += objects.get("3 duckie (0.88, 0.88)", 0)
                 intended.append(breakdown["by_direction"]["intended"]["J_clane"])
-    assert (f"the sampled CRLLK-D gives J_coll {crllk[0]:.3f}, {crllk[1]:.3f} and {crllk[2]:.3f}, "
-            f"against {ppo[0]:.3f} and {ppo[1]:.3f} for the original's fixed weights") in readme
-    assert f"{hits} of the CRLLK runs' {total} test collisions are with one duckie" in readme
-    assert f"{hits} of the {total} collisions of the CRLLK runs' test episodes" in readme
-    assert (f"its learned λ_coll ended at {lam[0]:.1f}, {lam[1]:.1f} and {lam[2]:.1f}), where the "
-            f"original's fixed weight of 4 gives PPO-D {ppo[0]:.3f} and {ppo[1]:.3f}") in readme
     spread = f"{min(intended):.2f}–{max(intended):.2f} dm"
-    assert f"every run deviates {spread}, over α1" in readme
-    assert f"J_clane is {spread} for every CRLLK run" in readme
+    for text in (readme, home):
+        assert (f"the sampled CRLLK-D gives J_coll {crllk[0]:.3f}, {crllk[1]:.3f} and "
+                f"{crllk[2]:.3f}, against {ppo[0]:.3f} and {ppo[1]:.3f} for the original's "
+                "fixed weights") in text
+        assert f"{hits} of the CRLLK runs' {total} test collisions are with one duckie" in text
+        assert f"every run deviates {spread}, over α1" in text
+    assert f"{hits} of the {total} collisions of the CRLLK runs' test episodes" in camera
+    assert (f"its learned λ_coll ended at {lam[0]:.1f}, {lam[1]:.1f} and {lam[2]:.1f}), where the "
+            f"original's fixed weight of 4 gives PPO-D {ppo[0]:.3f} and {ppo[1]:.3f}") in camera
+    assert f"J_clane is {spread} for every CRLLK run" in camera
     teacher = json.loads((REPO / "results/scripted/teacher-obstacle_loop-margin0.07.json")
                          .read_text())["teacher"]
     assert teacher["summary"]["J_coll"] == 0
@@ -244,7 +251,7 @@ def _misses(task: str, agents: dict[str, tuple[int, ...]], name: str) -> list[tu
     return found
 
 
-def test_the_readme_s_maps_without_obstacles_are_the_test_evaluations():
+def test_the_maps_without_obstacles_are_the_test_evaluations():
     """"every seed" on small_loop; on zigzag one sampled and one deployed miss, each J_coll
     0.03, as the prose names them; the fixed weights' one miss."""
     for name in ("test", "test-mode"):
@@ -254,7 +261,7 @@ def test_the_readme_s_maps_without_obstacles_are_the_test_evaluations():
     baselines = {"PPO-D": (0, 1), "PPO-C": (0, 1)}
     assert [m for task in ("small_loop", "zigzag") for m in _misses(task, baselines, "test")] \
         == [("PPO-C", 1, "0.03")]
-    readme = " ".join((REPO / "README.md").read_text().split())
+    camera = prose("results/camera.md")
     assert "the misses are J_coll 0.03 (zigzag: CRLLK-C seed 2 sampled, CRLLK-D seed 2 deployed)" \
-        in readme
-    assert "one run (zigzag, PPO-C seed 1 sampled, J_coll 0.03)" in readme
+        in camera
+    assert "one run (zigzag, PPO-C seed 1 sampled, J_coll 0.03)" in camera

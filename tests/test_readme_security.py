@@ -1,8 +1,10 @@
-"""The README's Security section quotes the limits the code enforces."""
+"""The documentation's Security page quotes the limits the code enforces, and its pages on
+the robot the watchdog's."""
 
 from __future__ import annotations
 
-from pathlib import Path
+import pytest
+from docs_pages import page, prose
 
 from crllk.deployment.ros_node import FRAME_TIMEOUT_S
 from crllk.files import STALE_TEMP_AGE_S
@@ -12,8 +14,7 @@ from crllk.recording.live import LIVE_PORT
 from crllk.recording.viewer import VIEWER_PORT
 from crllk.yaml_files import MAX_ALIAS_NODES, MAX_YAML_BYTES
 
-README = (Path(__file__).resolve().parents[1] / "README.md").read_text()
-SECTION = " ".join(README.split("## Security", 1)[1].split("\n## ", 1)[0].split())
+SECTION = " ".join(page("security.md").split())
 
 
 def test_the_security_section_quotes_the_limits():
@@ -28,6 +29,7 @@ def test_the_security_section_quotes_the_limits():
     assert f"sets `{variable}={value}`" in SECTION
 
 
-def test_the_deployment_section_quotes_the_watchdog():
-    text = " ".join(README.split())
+@pytest.mark.parametrize("where", ["sim-to-real.md", "tutorials/deploy.md"])
+def test_the_deployment_pages_quote_the_watchdog(where):
+    text = prose(where)
     assert f"whenever no frame has come for {FRAME_TIMEOUT_S:g} s (`--frame-timeout`)" in text

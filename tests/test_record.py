@@ -287,9 +287,12 @@ def test_served_recording_listens_on_localhost_only(tmp_path, monkeypatch):
     assert report.warnings == ()
 
 
-def test_every_rerun_command_in_the_readme_binds_to_localhost():
-    """Without ``--bind`` the viewer, even one that only connects, listens on 0.0.0.0."""
-    text = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+def test_every_rerun_command_in_the_documentation_binds_to_localhost():
+    """Without ``--bind`` the viewer, even one that only connects, listens on 0.0.0.0: every
+    command of the README and of every page of the site binds to 127.0.0.1."""
+    from docs_pages import page, pages
+
+    text = "\n".join(page(name) for name in ["README.md", *pages()])
     commands = re.findall(r"^rerun .*$", text, flags=re.MULTILINE)  # code blocks
     commands += re.findall(r"`(rerun [^`]*)`", " ".join(text.split()))  # inline, unwrapped
     assert commands

@@ -1,6 +1,6 @@
-"""The speed figures the README quotes come from the committed measurements: the default
-command's wall times (``wall-time.txt``) and the alternating benchmark rounds
-(``results/bench/pixel-speed-alternating.txt``)."""
+"""The speed figures the README and the documentation site quote come from the committed
+measurements: the default command's wall times (``wall-time.txt``) and the alternating
+benchmark rounds (``results/bench/pixel-speed-alternating.txt``)."""
 
 from __future__ import annotations
 
@@ -9,9 +9,9 @@ import statistics
 from pathlib import Path
 
 import pytest
+from docs_pages import page, prose
 
 REPO = Path(__file__).resolve().parents[1]
-README = (REPO / "README.md").read_text()
 WALL_TIME = REPO / "results/runs/pixels/obstacle_loop/default-command-alone/wall-time.txt"
 ROUNDS = REPO / "results/bench/pixel-speed-alternating.txt"
 
@@ -21,13 +21,24 @@ def _minutes(text: str) -> list[float]:
     return [int(m) + float(s) / 60 for m, s in found]
 
 
-def test_the_default_command_times_are_the_committed_ones():
+@pytest.mark.parametrize("where", ["results/index.md", "benchmarks.md"])
+def test_the_default_command_times_are_the_committed_ones(where):
     """Newest first: the current code's time, then earlier ones, the first measured last."""
     times = _minutes(WALL_TIME.read_text())
     newest, first = times[0], times[-1]
     assert len(times) == 3 and f"{first:.1f}" == "25.1"
-    assert f"**{newest:.1f} min against {first:.1f}**" in README
-    assert f"({first / newest:.2f}x)" in README
+    assert f"**{newest:.1f} min against {first:.1f}**" in prose(where)
+    assert f"({first / newest:.2f}x)" in prose(where)
+
+
+def test_the_default_command_s_round_figure_is_the_committed_time():
+    """The README, the home page, the set-up and In short say "about 10 minutes": the newest
+    committed time, rounded."""
+    newest = round(_minutes(WALL_TIME.read_text())[0])
+    for where in ("README.md", "index.md"):
+        assert f"about {newest} min" in prose(where)
+        assert f"(the default command: {newest} min on 2 cores)" in prose(where)
+    assert f"about {newest} minutes on 2 cores" in prose("getting-started.md")
 
 
 @pytest.mark.parametrize("row", ["training, pixels (frames/s)", "training, state (frames/s)"])
@@ -44,13 +55,13 @@ def test_the_training_rows_are_the_committed_rounds(row):
     cells = (", ".join(f"{x:.0f}" for x in rounds["base"]),
              ", ".join(f"{x:.0f}" for x in rounds["main"]),
              ", ".join(f"{r:.2f}" for r in ratios), f"{statistics.median(ratios):.2f}")
-    assert f"| {row} | " + " | ".join(cells) + " |" in README
+    assert f"| {row} | " + " | ".join(cells) + " |" in page("benchmarks.md")
 
 
 def test_the_default_command_s_training_time_is_the_committed_one():
     """The prose about the timed run quotes its committed training time."""
     training_s = float((WALL_TIME.parent / "eval.csv").read_text().splitlines()[-1].split(",")[2])
-    assert f"{training_s / 60:.1f} min of training" in README
+    assert f"{training_s / 60:.1f} min of training" in prose("results/index.md")
 
 
 def test_the_retrained_small_loop_run_meets_what_its_old_run_met():

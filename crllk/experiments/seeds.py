@@ -4,7 +4,8 @@ The experiments' tables give mean ± std across seeds; a constraint is claimed p
 file shows each seed's evaluation next to the others, for the sampled policy (the one the
 constraints are learned for) and for the deployed one (its mode). It is written from the
 tables' JSON documents (``table1.json`` for ``small_loop``, ``table_<map>.json`` for the
-others) whenever an experiment writes a table, and the README quotes its tables as they are.
+others) whenever an experiment writes a table, and the documentation site includes it as it
+is.
 """
 
 from __future__ import annotations

@@ -230,10 +230,13 @@ class PIDLagrangeMultiplier(_Multiplier):
     Args:
         threshold: α (>= 0).
         initial: λ (and the integral) before any update (>= 0).
-        kp, ki, kd: proportional, integral and derivative gains (>= 0, ki > 0).
+        kp: proportional gain (>= 0).
+        ki: integral gain (> 0).
+        kd: derivative gain (>= 0).
         max_value: λ_max >= initial.
         schedule: ``"episode"`` or ``"batch"``, as for :class:`LagrangeMultiplier`.
-        ema_p, ema_d: smoothing factors β_p, β_d in [0, 1); 0 disables smoothing.
+        ema_p: smoothing factor β_p in [0, 1); 0 disables smoothing.
+        ema_d: smoothing factor β_d in [0, 1); 0 disables smoothing.
         frozen: if ``True``, λ stays at ``initial``.
     """
 

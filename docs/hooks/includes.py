@@ -1,0 +1,74 @@
+"""MkDocs hook: the site shows the committed results as the experiments wrote them.
+
+A page includes a file of the repository with a line of its own::
+
+    <!-- include results/pixels/table1.md -->           the file (missing: the build fails)
+    <!-- include-if-present results/pixels/aids.md -->  the file, or a note that it is not yet
+    <!-- include README.md#in-short -->                 the part of a file between
+                                                        ``<!-- section in-short -->`` and
+                                                        ``<!-- /section in-short -->``
+
+An included file's headings move one level down when it starts with a title (``# ...``), so
+that it sits below the page's own; links into ``docs/`` (written for the repository's view
+of the file) are made relative to the including page. The pictures under ``results/`` are
+published at the same paths, so a page of ``docs/results/`` shows ``results/pixels/sweep.png``
+as ``pixels/sweep.png``.
+"""
+
+from __future__ import annotations
+
+import posixpath
+import re
+from pathlib import Path
+
+from mkdocs.exceptions import PluginError
+from mkdocs.structure.files import File
+
+REPO = Path(__file__).resolve().parents[2]
+PICTURES = ("results/*/*.png",)
+_DIRECTIVE = re.compile(r"^<!-- (include|include-if-present) (\S+?)(?:#(\S+))? -->$", re.MULTILINE)
+_HEADING = re.compile(r"^(#{1,5}) ", re.MULTILINE)
+_DOCS_LINK = re.compile(r"\]\(docs/([^)]*)\)")
+
+
+def section(text: str, name: str, path: str) -> str:
+    """The lines between ``<!-- section NAME -->`` and ``<!-- /section NAME -->``."""
+    start, end = f"<!-- section {name} -->", f"<!-- /section {name} -->"
+    if start not in text or end not in text:
+        raise PluginError(f"{path}: no section {name!r} (mark it with {start} ... {end})")
+    return text.split(start, 1)[1].split(end, 1)[0].strip("\n")
+
+
+def expand(markdown: str, page: str, repo: Path = REPO) -> str:
+    """``markdown`` of the page at ``page`` (its path under ``docs/``) with its includes done."""
+
+    def include(match: re.Match) -> str:
+        kind, path, name = match.groups()
+        source = repo / path
+        if not source.is_file():
+            if kind == "include-if-present":
+                return f"*`{path}` is not written yet: its experiment has not finished.*"
+            raise PluginError(f"{page}: includes {path}, which does not exist")
+        text = source.read_text()
+        if name:
+            text = section(text, name, path)
+        if text.lstrip().startswith("# "):
+            text = _HEADING.sub(lambda m: "#" + m.group(1) + " ", text)
+        prefix = posixpath.relpath(".", posixpath.dirname(page) or ".")
+        return _DOCS_LINK.sub(lambda m: f"]({posixpath.join(prefix, m.group(1))})", text)
+
+    return _DIRECTIVE.sub(include, markdown)
+
+
+def on_files(files, config):
+    """Publish the committed result pictures beside the pages."""
+    for pattern in PICTURES:
+        for picture in sorted(REPO.glob(pattern)):
+            uri = picture.relative_to(REPO).as_posix()
+            files.append(File(uri, src_dir=str(REPO), dest_dir=config["site_dir"],
+                              use_directory_urls=config["use_directory_urls"]))
+    return files
+
+
+def on_page_markdown(markdown, page, config, files):
+    return expand(markdown, page.file.src_uri)

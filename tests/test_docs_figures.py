@@ -1,0 +1,136 @@
+"""Figures quoted in the prose of the README and of the documentation site are the committed
+results they name. The tables themselves are included as the experiments wrote them
+(``tests/test_results.py``); these checks cover the sentences beside them, and fail on a new
+figure of a checked kind (a "% farther", a run time range) until it is checked too."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import re
+from pathlib import Path
+
+import pytest
+from docs_pages import DOCS, page, pages, prose
+
+REPO = Path(__file__).resolve().parents[1]
+STATE = REPO / "results" / "state"
+TABLES = {"small_loop": "table1.json", "zigzag": "table_zigzag.json",
+          "obstacle_loop": "table_obstacle_loop.json"}
+
+
+def _travel(task: str) -> dict[str, float]:
+    document = json.loads((STATE / TABLES[task]).read_text())
+    travel = {agent: entry["J_R"]["mean"] for agent, entry in document["agents"].items()}
+    return {**travel, "follower": document["follower"]["J_R"]}
+
+
+def _farther(a: float, b: float) -> str:
+    return f"{round(100 * (a / b - 1))} % farther"
+
+
+def _state_sentences() -> list[str]:
+    """Every "% farther" of the From state page, written from the state tables."""
+    small, zigzag, obstacles = (_travel(task) for task in TABLES)
+    lane = {agent: entry["J_clane"]["mean"] for agent, entry in
+            json.loads((STATE / TABLES["small_loop"]).read_text())["agents"].items()}
+    return [
+        f"CRLLK-C travels {_farther(small['CRLLK-C'], small['CRLLK-D'])} than CRLLK-D and "
+        f"{_farther(small['CRLLK-C'], small['follower'])} than the scripted follower.",
+        f"CRLLK-D deviates {lane['CRLLK-D']:.2f} dm against {lane['PPO-D']:.2f} for PPO-D and "
+        f"travels {_farther(small['CRLLK-D'], small['PPO-D'])}; CRLLK-C {lane['CRLLK-C']:.2f} "
+        f"against {lane['PPO-C']:.2f} dm, {_farther(small['CRLLK-C'], small['PPO-C'])}.",
+        f"CRLLK-D travels {_farther(zigzag['CRLLK-D'], zigzag['PPO-D'])} than PPO-D, CRLLK-C "
+        f"{_farther(zigzag['CRLLK-C'], zigzag['PPO-C'])} than PPO-C and "
+        f"{_farther(zigzag['CRLLK-C'], zigzag['CRLLK-D'])} than CRLLK-D.",
+        f"CRLLK-C travels {_farther(obstacles['CRLLK-C'], obstacles['CRLLK-D'])} than CRLLK-D "
+        f"and {_farther(obstacles['CRLLK-C'], obstacles['PPO-C'])} than PPO-C.",
+    ]
+
+
+def test_the_state_page_s_comparisons_are_the_state_tables():
+    text = prose("results/state.md")
+    for sentence in _state_sentences():
+        assert sentence in text
+
+
+def test_every_farther_in_the_documentation_is_checked():
+    """A new "N % farther" anywhere fails until a test writes it from the results."""
+    checked = sum(len(re.findall(r"\d+ % farther", s)) for s in _state_sentences())
+    quoted = sum(len(re.findall(r"\d+ % farther", prose(name))) for name in _documents())
+    assert quoted == checked
+
+
+def _wall_ranges() -> set[str]:
+    """The training wall-time ranges the experiments wrote into their tables."""
+    found = set()
+    for table in REPO.glob("results/*/*.md"):
+        found |= set(re.findall(r"training wall time (\d+\.\d–\d+\.\d) min per run",
+                                table.read_text()))
+    return found
+
+
+ELSEWHERE = {
+    "2.3–4.4": "the fixed-weight sweep from state (its runs' metrics.csv, before the sweep's "
+               "Markdown gave wall times)",
+    "24.9–28.4": "the four randomised runs of the robustness experiment, with five evaluations",
+    "15–20": "the robustness conditions rendered at 640×480, per 100 episodes",
+    "4.5–7.5": "make test from a fresh clone (Development)",
+}
+"""Time ranges quoted from measurements the experiments do not tabulate, with their source.
+A new range fails until it is an experiment's or added here after checking it."""
+
+
+def _documents() -> list[str]:
+    return ["README.md", *pages()]
+
+
+def test_every_time_range_is_an_experiment_s_or_known():
+    generated = _wall_ranges()
+    for name in _documents():
+        if name == "findings.md":  # each trial's time is stated with its command there
+            continue
+        for low, high in re.findall(r"(\d+(?:\.\d+)?)–(\d+(?:\.\d+)?) min\b", prose(name)):
+            quoted = f"{low}–{high}"
+            assert quoted in generated or quoted in ELSEWHERE, (name, quoted)
+
+
+def test_the_evaluation_page_s_sampled_and_mode_figures_are_the_runs():
+    """The validation evaluations of CRLLK-D on obstacle_loop, sampled and from its mode."""
+    root = REPO / "results/runs/pixels/obstacle_loop"
+    sampled, mode = ([json.loads((root / f"CRLLK-D-a0.5-seed{s}" / f"{name}.json").read_text())
+                      ["summary"] for s in (0, 1)] for name in ("eval", "eval-mode"))
+    text = prose("evaluation.md")
+    assert (f"gave J_coll {sampled[0]['J_coll']:.2f} / {sampled[1]['J_coll']:.2f} sampled and "
+            f"{mode[0]['J_coll']:.2f} / {mode[1]['J_coll']:.2f} from its mode (seeds 0 / 1), "
+            f"with J_clane {sampled[0]['J_clane']:.3f} / {sampled[1]['J_clane']:.3f} dm sampled "
+            f"and {mode[0]['J_clane']:.3f} / {mode[1]['J_clane']:.3f} dm from its mode") in text
+    assert all(m["J_coll"] <= s["J_coll"] and m["J_clane"] > s["J_clane"]
+               for s, m in zip(sampled, mode, strict=True))
+
+
+@pytest.mark.parametrize("stale", ["0.06 / 0.08", "35–80 min per run", "44 % farther"])
+def test_the_stale_figures_are_gone(stale):
+    for name in _documents():
+        assert stale not in prose(name), name
+
+
+def test_the_readme_s_results_table_is_what_the_script_writes():
+    spec = importlib.util.spec_from_file_location("readme_results",
+                                                  REPO / "scripts" / "readme_results.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    readme = page("README.md")
+    block = readme.split(module.START, 1)[1].split(module.END, 1)[0]
+    assert block.strip() == module.results_table()
+
+
+def test_every_results_file_named_exists():
+    """A page that names a committed file under results/ names one that is there."""
+    for name in _documents():
+        raw = (REPO / name).read_text() if name == "README.md" else (DOCS / name).read_text()
+        pending = re.findall(r"<!-- include-if-present (\S+) -->", raw)
+        for path in re.findall(r"`(results/[^`\s]+)`", page(name)):
+            if any(c in path for c in "<>*{}") or "..." in path or path in pending:
+                continue
+            assert (REPO / path).exists() or list(REPO.glob(path + "*")), (name, path)
