@@ -134,3 +134,15 @@ def test_every_results_file_named_exists():
             if any(c in path for c in "<>*{}") or "..." in path or path in pending:
                 continue
             assert (REPO / path).exists() or list(REPO.glob(path + "*")), (name, path)
+
+
+def test_the_sweep_s_gains_are_the_sweep_s():
+    """CRLLK-D's margin over the best fixed pair that holds, per map, as the From state page
+    quotes it, from ``results/state/sweep.json``."""
+    maps = json.loads((STATE / "sweep.json").read_text())["maps"]
+    parts = []
+    for task, entry in maps.items():
+        ours, best = entry["crllk"]["J_R"]["mean"], entry["best_feasible_fixed"]["J_R"]["mean"]
+        parts.append(f"{ours - best:.2f} m ({round(100 * (ours - best) / best)} %) on `{task}`")
+    quoted = f"by {parts[0]}, {parts[1]} and {parts[2]}"
+    assert quoted in prose("results/state.md")
