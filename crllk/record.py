@@ -18,7 +18,8 @@ from pathlib import Path
 from crllk.cli import Parser, fail, positive_int, run
 from crllk.errors import ConfigError
 from crllk.files import output_lock, write_problem
-from crllk.recording.recorder import VIEWERS, RecordingReport, record_episodes
+from crllk.recording.recorder import RecordingReport, record_episodes
+from crllk.recording.sinks import VIEWERS
 from crllk.tasks.follower import FollowerPolicy
 
 

@@ -26,7 +26,7 @@ from crllk.envs.episodes import EpisodeStats
 from crllk.errors import RecordingError
 from crllk.maps import markings
 from crllk.recording import blueprint as layout
-from crllk.recording import recorder
+from crllk.recording import sinks
 from crllk.recording.entities import ACTION_ENTITY_PATHS, entity_paths
 from crllk.recording.recorder import read_recording, record_episodes
 from crllk.rl.models import ModelConfig, make_actor
@@ -233,16 +233,16 @@ def test_unreachable_viewer_is_reported_once_and_the_files_are_written(tmp_path,
     monkeypatch.setenv("PATH", "")
     for name in ("DISPLAY", "WAYLAND_DISPLAY", "WAYLAND_SOCKET"):
         monkeypatch.delenv(name, raising=False)
-    monkeypatch.setattr(recorder, "VIEWER_PORT", _free_port())
-    monkeypatch.setattr(recorder, "_FAILED_VIEWERS", set())
+    monkeypatch.setattr(sinks, "VIEWER_PORT", _free_port())
+    monkeypatch.setattr(sinks, "_FAILED_VIEWERS", set())
     attempts = []
-    spawn_viewer = recorder.spawn_viewer
+    spawn_viewer = sinks.spawn_viewer
 
     def spawn(port):
         attempts.append(port)
         return spawn_viewer(port)
 
-    monkeypatch.setattr(recorder, "spawn_viewer", spawn)
+    monkeypatch.setattr(sinks, "spawn_viewer", spawn)
     env = _env(1)
     reports = [record_episodes(env, _actor(env), 1, tmp_path / f"v{k}.rrd", viewer="spawn")
                for k in range(2)]
@@ -270,7 +270,7 @@ def _listening_addresses(port: int) -> set[str]:
 @pytest.mark.skipif(not Path("/proc/net/tcp").exists(), reason="needs Linux /proc/net/tcp")
 def test_served_recording_listens_on_localhost_only(tmp_path, monkeypatch):
     port = _free_port()
-    monkeypatch.setattr(recorder, "VIEWER_PORT", port)
+    monkeypatch.setattr(sinks, "VIEWER_PORT", port)
     env = _env(1)
     actor = _actor(env)
     seen: list[set[str]] = []

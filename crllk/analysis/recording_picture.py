@@ -26,7 +26,7 @@ from crllk.cli import Parser, run
 from crllk.errors import ConfigError
 from crllk.files import write_problem
 from crllk.recording import entities as R
-from crllk.recording.recorder import read_recording
+from crllk.recording.sinks import read_recording
 
 _FRAMES = 4
 """Camera frames shown, evenly spread over the recording."""

@@ -2,7 +2,7 @@
 
 Each strip is an array ``[K, 3]`` of points (x east, y north, z up, m) sampled every 2 cm
 along a lane. The tape lies where the floor texture (:mod:`crllk.sim.texture`) paints it;
-:mod:`crllk.recording.recorder` draws these strips over the tiles.
+:mod:`crllk.recording.scene` draws these strips over the tiles.
 """
 
 from __future__ import annotations

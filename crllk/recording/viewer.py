@@ -5,7 +5,7 @@ already answering on the port or runs the ``rerun`` executable (``rerun --bind 1
 and waits until it listens; :func:`start_viewer` runs one with extra arguments (a viewer that
 connects to a training run, a headless one) and :func:`stop_viewer` ends it with its process
 group. This module does not import the rerun Python package: it runs the executable with
-:mod:`subprocess` and probes sockets; :mod:`crllk.recording.recorder`,
+:mod:`subprocess` and probes sockets; :mod:`crllk.recording.sinks`,
 :mod:`crllk.recording.live` and :mod:`crllk.screenshots` talk to the viewer.
 """
 
