@@ -146,3 +146,22 @@ def test_the_sweep_s_gains_are_the_sweep_s():
         parts.append(f"{ours - best:.2f} m ({round(100 * (ours - best) / best)} %) on `{task}`")
     quoted = f"by {parts[0]}, {parts[1]} and {parts[2]}"
     assert quoted in prose("results/state.md")
+
+
+def test_the_teacher_s_figures_on_the_training_page_are_its_evaluations():
+    """The privileged teacher on obstacle_loop at its default margin and at 4 cm."""
+    runs = {margin: json.loads((REPO / f"results/scripted/teacher-obstacle_loop-margin{margin}"
+                                ".json").read_text())["teacher"]["summary"]
+            for margin in ("0.07", "0.04")}
+    default, close = runs["0.07"], runs["0.04"]
+    assert (f"J_coll {default['J_coll']:g}, J_clane {default['J_clane']:.3f} dm, J_R "
+            f"{default['J_R']:.2f} m; {close['J_clane']:.3f} dm and {close['J_R']:.2f} m at 4 cm"
+            ) in prose("training.md")
+
+
+def test_the_state_page_s_follower_is_the_tables():
+    cells = []
+    for task in ("zigzag", "obstacle_loop"):
+        f = json.loads((STATE / TABLES[task]).read_text())["follower"]
+        cells.append(f"{f['J_clane']:.3f} / {f['J_coll']:.2f} / {f['J_R']:.2f} on `{task}`")
+    assert f"through the same episodes: {cells[0]}, {cells[1]}." in prose("results/state.md")
