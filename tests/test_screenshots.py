@@ -11,6 +11,7 @@ import pytest
 
 from crllk import screenshots
 from crllk.cli import exit_status
+from crllk.recording import headless
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -21,7 +22,7 @@ def no_viewer(monkeypatch):
     def refuse(*args, **kwargs):
         raise AssertionError("a viewer was started for bad input")
 
-    monkeypatch.setattr(screenshots, "start_viewer", refuse)
+    monkeypatch.setattr(headless, "start_viewer", refuse)
 
 
 def run_main(argv: list[str], capsys) -> tuple[int | str | None, str]:

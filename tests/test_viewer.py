@@ -19,19 +19,10 @@ from PIL import Image
 from tiny_runs import TINY
 
 import crllk
+from crllk.recording import headless
 from crllk.recording.entities import CAMERA, CAMERA_VIEW, IMAGE
 from crllk.recording.recorder import record_episodes
 from crllk.recording.viewer import free_port, viewer_listening
-from crllk.screenshots import (
-    WINDOW_SIZE,
-    ScreenshotError,
-    headless_viewer,
-    seek,
-    settled_png,
-    view_id,
-    view_problems,
-    wait_loaded,
-)
 from crllk.tasks.follower import FollowerPolicy
 
 pytestmark = pytest.mark.viewer
@@ -65,7 +56,7 @@ def flat(pixels: np.ndarray) -> bool:
 
 @pytest.fixture(scope="module")
 def viewer():
-    with headless_viewer() as client:
+    with headless.headless_viewer() as client:
         yield client
 
 
@@ -97,17 +88,18 @@ def shoot(viewer, path: Path) -> tuple[np.ndarray, np.ndarray]:
     """The whole window and the camera panel at SHOT_TIME, the recording alone open."""
     viewer.close("all")
     viewer.open(str(path))
-    wait_loaded(viewer, "sim_time")
-    seek(viewer, "sim_time", SHOT_TIME)
-    return image(settled_png(viewer)), image(settled_png(viewer, view_id(viewer, CAMERA_VIEW)))
+    headless.wait_loaded(viewer, "sim_time")
+    headless.seek(viewer, "sim_time", SHOT_TIME)
+    camera = headless.view_id(viewer, CAMERA_VIEW)
+    return image(headless.settled_png(viewer)), image(headless.settled_png(viewer, camera))
 
 
 def test_camera_panel_shows_the_road_and_no_view_fails(viewer, follower_recording):
     window, camera = shoot(viewer, follower_recording)
-    assert window.shape == (WINDOW_SIZE[1], WINDOW_SIZE[0], 3)
+    assert window.shape == (headless.WINDOW_SIZE[1], headless.WINDOW_SIZE[0], 3)
     assert camera.shape[0] > 100 and camera.shape[1] > 100
     assert not flat(centre(camera)), (centre(camera).std(), "camera panel is one flat colour")
-    errors = [p for p in view_problems(viewer) if p.severity == "error"]
+    errors = [p for p in headless.view_problems(viewer) if p.severity == "error"]
     assert not errors
 
 
@@ -122,10 +114,10 @@ def test_a_broken_camera_is_caught(viewer, tmp_path):
 def test_missing_timeline_and_view_are_named(viewer, follower_recording):
     viewer.close("all")
     viewer.open(str(follower_recording))
-    with pytest.raises(ScreenshotError, match="sim_time"):
-        wait_loaded(viewer, "no_such_timeline")
-    with pytest.raises(ScreenshotError, match=CAMERA_VIEW):
-        view_id(viewer, "no such view")
+    with pytest.raises(headless.ScreenshotError, match="sim_time"):
+        headless.wait_loaded(viewer, "no_such_timeline")
+    with pytest.raises(headless.ScreenshotError, match=CAMERA_VIEW):
+        headless.view_id(viewer, "no such view")
 
 
 def test_training_streams_its_live_view_from_start_to_end(viewer, tmp_path):
@@ -149,7 +141,7 @@ def test_training_streams_its_live_view_from_start_to_end(viewer, tmp_path):
             training.kill()
     assert training.returncode == 0, err[-2000:]
     assert f"live view: rerun --bind 127.0.0.1 --connect rerun+http://127.0.0.1:{port}" in out
-    wait_loaded(viewer, "iteration")
+    headless.wait_loaded(viewer, "iteration")
     iteration = next(t for r in viewer.get_state().recordings for t in r.timelines
                      if t.name == "iteration")
     assert (iteration.start, iteration.end) == (1, ITERATIONS)
@@ -157,4 +149,4 @@ def test_training_streams_its_live_view_from_start_to_end(viewer, tmp_path):
         paths_only=True).entities}
     assert {"train/J_clane", "train/lambda_lane", "train/loss_objective", "world/robot",
             "world/robot/camera/image"} <= entities
-    assert not [p for p in view_problems(viewer) if p.severity == "error"]
+    assert not [p for p in headless.view_problems(viewer) if p.severity == "error"]

@@ -6,7 +6,7 @@ and waits until it listens; :func:`start_viewer` runs one with extra arguments (
 connects to a training run, a headless one) and :func:`stop_viewer` ends it with its process
 group. This module does not import the rerun Python package: it runs the executable with
 :mod:`subprocess` and probes sockets; :mod:`crllk.recording.sinks`,
-:mod:`crllk.recording.live` and :mod:`crllk.screenshots` talk to the viewer.
+:mod:`crllk.recording.live` and :mod:`crllk.recording.headless` talk to the viewer.
 """
 
 from __future__ import annotations
