@@ -3,7 +3,8 @@
 The loss reads a ready advantage (for constrained learning the λ-combination of
 :mod:`crllk.rl.lagrangian_advantage` writes it), optionally standardises it per minibatch, and
 adds one value loss for the reward critic and one per cost critic, and an imitation term. The
-advantages and value targets come from the GAE modules of :func:`make_advantage_modules`.
+advantages and value targets come from the GAE modules of
+:func:`~crllk.rl.advantages.make_advantage_modules`.
 """
 
 from __future__ import annotations
@@ -21,10 +22,9 @@ from torch import nn
 from torch.distributions import Distribution
 from torchrl.modules import ProbabilisticActor, TanhNormal
 from torchrl.objectives import LossModule
-from torchrl.objectives.value import GAE
 
-from crllk.rl.lagrangian_advantage import REWARD_ADVANTAGE, check_cost_names, cost_advantage_key
-from crllk.tasks.constraints import cost_key
+from crllk.rl.advantages import AdvantageModules, make_advantage_modules
+from crllk.rl.lagrangian_advantage import check_cost_names
 
 _ADVANTAGE_STD_EPS = 1e-6  # floor of the advantage std when standardising (advantage units)
 _TEACHER_MARGIN = 1e-3  # continuous teacher actions are clamped this far inside [-1, 1]
@@ -338,70 +338,4 @@ def _non_negative(name: str, value: float) -> float:
     return value
 
 
-@dataclass(frozen=True)
-class AdvantageModules:
-    """One TorchRL ``GAE`` for the reward and one per cost; calling it runs them all."""
-
-    reward: GAE
-    costs: dict[str, GAE]
-
-    @torch.no_grad()
-    def __call__(self, tensordict: TensorDictBase) -> TensorDictBase:
-        """Writes every advantage and value target into ``tensordict`` (shape [*B, T])."""
-        self.reward(tensordict)
-        for module in self.costs.values():
-            module(tensordict)
-        return tensordict
-
-
-def make_advantage_modules(
-    gamma: float,
-    lmbda: float,
-    critic_network: TensorDictModule,
-    cost_critics: Mapping[str, TensorDictModule],
-    *,
-    loss: CriticsPPOLoss | None = None,
-    average_gae: bool = False,
-) -> AdvantageModules:
-    """GAE(γ, λ_GAE) for the reward and for each cost: the value targets the loss reads, and
-    the advantages the λ-combination reads (:mod:`crllk.rl.lagrangian_advantage`: the reward's
-    in ``advantage_reward``, each cost's in ``advantage_<cost>``).
-
-    Per signal x (reward, or cost c_i read from ``("next", "cost_<name>")``)::
-
-        δ_t = x_t + γ (1 − terminated_t) V(s_{t+1}) − V(s_t)
-        A_t = δ_t + γ λ_GAE (1 − done_t) A_{t+1},      G_t = A_t + V(s_t)
-
-    Args:
-        gamma: Discount γ.
-        lmbda: GAE λ.
-        critic_network: Reward critic.
-        cost_critics: Cost critics by name, as given to the loss.
-        loss: The loss the advantages are for, so that renamed keys agree (default: the
-            loss's default keys).
-        average_gae: Standardise each advantage (leave ``False`` to combine them unscaled).
-    """
-    if not (0.0 <= gamma <= 1.0 and 0.0 <= lmbda <= 1.0) or math.isnan(gamma + lmbda):
-        raise ValueError(f"gamma and lmbda must lie in [0, 1], got {gamma}, {lmbda}")
-    names = check_cost_names(tuple(cost_critics))
-    reward = GAE(gamma=gamma, lmbda=lmbda, value_network=critic_network, average_gae=average_gae)
-    keys = None if loss is None else loss.tensor_keys
-    reward.set_keys(
-        value=critic_network.out_keys[0] if keys is None else keys.value,
-        advantage=REWARD_ADVANTAGE,
-        value_target="value_target" if keys is None else keys.value_target,
-    )
-    costs = {}
-    for name in names:
-        critic = cost_critics[name]
-        advantage = cost_advantage_key(name)
-        if loss is None:
-            target, value = f"value_target_{name}", critic.out_keys[0]
-        else:
-            target, value = loss.cost_keys(name)
-        module = GAE(gamma=gamma, lmbda=lmbda, value_network=critic, average_gae=average_gae)
-        module.set_keys(
-            reward=cost_key(name), value=value, advantage=advantage, value_target=target
-        )
-        costs[name] = module
-    return AdvantageModules(reward=reward, costs=costs)
+__all__ = ["AdvantageModules", "CriticsPPOLoss", "explained_variance", "make_advantage_modules"]
