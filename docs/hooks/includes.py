@@ -12,7 +12,8 @@ An included file's headings move one level down when it starts with a title (``#
 that it sits below the page's own; links into ``docs/`` (written for the repository's view
 of the file) are made relative to the including page. The pictures under ``results/`` are
 published at the same paths, so a page of ``docs/results/`` shows ``results/pixels/sweep.png``
-as ``pixels/sweep.png``.
+as ``pixels/sweep.png``. In the API reference, the Sphinx roles of docstrings
+(``:class:`Name```) are dropped before their code.
 """
 
 from __future__ import annotations
@@ -29,6 +30,7 @@ PICTURES = ("results/*/*.png",)
 _DIRECTIVE = re.compile(r"^<!-- (include|include-if-present) (\S+?)(?:#(\S+))? -->$", re.MULTILINE)
 _HEADING = re.compile(r"^(#{1,5}) ", re.MULTILINE)
 _DOCS_LINK = re.compile(r"\]\(docs/([^)]*)\)")
+_SPHINX_ROLE = re.compile(r":(?:class|func|meth|mod|attr|data|exc|obj):(?=<code)")
 
 
 def section(text: str, name: str, path: str) -> str:
@@ -72,3 +74,8 @@ def on_files(files, config):
 
 def on_page_markdown(markdown, page, config, files):
     return expand(markdown, page.file.src_uri)
+
+
+def on_page_content(html, page, config, files):
+    """The API reference shows a docstring's ``:class:`Name``` as the code ``Name``."""
+    return _SPHINX_ROLE.sub("", html)
