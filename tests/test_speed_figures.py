@@ -79,3 +79,24 @@ def test_the_retrained_small_loop_run_meets_what_its_old_run_met():
     assert sum(satisfied("CRLLK-D-a0.5-seed0")) == 8
     note = (runs / "retrained-950c9c0" / "README.md").read_text()
     assert "at all ten" in note and "at eight of its ten" in note
+
+
+def test_where_the_time_goes_is_the_committed_measurement():
+    """The Benchmarks page's per-iteration times and rates, from the committed bench output:
+    1,024 frames per iteration, two workers."""
+    rates = {}
+    for line in (REPO / "results/bench/where-the-time-goes.txt").read_text().splitlines():
+        if ", workers=2 (frames/s)" in line:
+            name, value = line.split(" (frames/s)")
+            rates[name] = float(value.split()[0])
+    text = prose("benchmarks.md")
+
+    def quoted(kind: str) -> str:
+        return f"{1024 / rates[kind]:.2f} s ({rates[kind]:,.0f} frames/s"
+
+    assert f"pixel iteration of 1,024 frames takes {quoted('training, pixels, workers=2')})" \
+        in text
+    assert f"collection alone takes {quoted('collection, pixels, workers=2')}:" in text
+    assert f"a state iteration takes {quoted('training, state, workers=2')})" in text
+    state = rates["collection, state, workers=2"]
+    assert f"{1024 / state:.2f} s of it collecting ({state:,.0f} frames/s)" in text
