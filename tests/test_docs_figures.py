@@ -165,3 +165,17 @@ def test_the_state_page_s_follower_is_the_tables():
         f = json.loads((STATE / TABLES[task]).read_text())["follower"]
         cells.append(f"{f['J_clane']:.3f} / {f['J_coll']:.2f} / {f['J_R']:.2f} on `{task}`")
     assert f"through the same episodes: {cells[0]}, {cells[1]}." in prose("results/state.md")
+
+
+def test_in_short_s_pilot_parity_is_the_parity_table_s():
+    """The README's (and the home page's) range of agreement is the Sim-to-real table's, over
+    the policies trained for the robot at 8× supersampling."""
+    rows = [line for line in page("sim-to-real.md").splitlines()
+            if line.startswith("| `small_loop`, randomised") and "supersample=8" in line]
+    assert len(rows) == 2
+    shares = [float(v) for row in rows for v in re.findall(r"\*\*([\d.]+) %\*\*", row)]
+    assert len(shares) == 6
+    low, high = min(shares), max(shares)
+    for where in ("README.md", "index.md"):
+        assert f"on {low:.1f}–{high:g} % of frames (policies trained for the robot at 8× " \
+            "supersampling, two seeds)" in prose(where)
