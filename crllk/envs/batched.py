@@ -32,6 +32,11 @@ env built with the same arguments continues exactly as the original would (train
 Seeding: sub-environment ``i`` draws its spawns from ``np.random.RandomState(s_i)`` where
 ``s_i = sub_env_seeds(seed, N)[i]`` (children of ``np.random.SeedSequence(seed)``), so
 ``crllk.load(task, seed=s_i, ...)`` reproduces sub-environment ``i`` step for step.
+
+What the environments over simulations stepped elsewhere share (merging and splitting their
+workers' snapshots, the mirrored teacher flag) lives in :mod:`crllk.envs.workers`. The rest stays
+one file: it is one class, whose specs, reset, step, observation and snapshot methods all read
+and write the same per-simulation arrays.
 """
 
 from __future__ import annotations
@@ -47,6 +52,12 @@ from tensordict import TensorDict, TensorDictBase
 from torchrl.data import Bounded, Categorical, Composite, TensorSpec, Unbounded
 from torchrl.envs import EnvBase
 
+from crllk.envs.workers import (
+    SNAPSHOT_ARRAYS,
+    MirroredTeacherFlag,
+    merge_sim_states,
+    split_sim_state,
+)
 from crllk.sim.camera_effects import apply_effects
 from crllk.sim.physics import Physics
 from crllk.tasks.config import TaskConfig, load_task_config
@@ -65,8 +76,6 @@ from crllk.tasks.teacher import Teacher
 
 DONE_KEYS = ("done", "terminated", "truncated")
 TERMINATIONS = (None, "off_road", "collision", "unstable")
-SNAPSHOT_ARRAYS = ("observations", "states", "history_images")
-"""The per-simulation arrays of a snapshot (the last one only with a frame history)."""
 """The ``"termination"`` entry's codes: why the task ended the episode on this step."""
 
 
@@ -373,68 +382,6 @@ class BatchedLaneKeepingEnv(EnvBase):
         super().close(raise_if_closed=raise_if_closed)
 
 
-class MirroredTeacherFlag:
-    """:attr:`teacher_active` of simulations stepped elsewhere (worker processes, remote
-    collectors): kept here, and a change is sent to them by :meth:`_send_teacher_active`."""
-
-    _teacher_active = False
-
-    @property
-    def teacher_active(self) -> bool:
-        """Whether observations carry the teacher's action (set in every worker)."""
-        return self._teacher_active
-
-    @teacher_active.setter
-    def teacher_active(self, active: bool) -> None:
-        if bool(active) != self._teacher_active:
-            self._send_teacher_active(bool(active))
-            self._teacher_active = bool(active)
-
-    def _send_teacher_active(self, active: bool) -> None:
-        """Sets :meth:`BatchedLaneKeepingEnv.set_teacher_active` in every worker."""
-        raise NotImplementedError
-
-
-def merge_sim_states(states: Sequence[dict[str, Any]]) -> dict[str, Any]:
-    """One :meth:`BatchedLaneKeepingEnv.sim_state` from the snapshots of consecutive slices
-    of the simulations (workers in order): the snapshot one env holding them all would take."""
-    first = states[0]
-    merged = {key: first[key] for key in ("task", "observation", "action", "privileged_state",
-                                          "teacher", "commands", "history") if key in first}
-    for state in states[1:]:
-        for key, value in merged.items():
-            if state.get(key) != value:
-                raise ValueError(f"snapshots disagree on {key}: {value!r}, {state.get(key)!r}")
-    merged["num_envs"] = sum(state["num_envs"] for state in states)
-    for key in ("seeds", "step_counts", "sub_envs"):
-        merged[key] = [item for state in states for item in state[key]]
-    for key in SNAPSHOT_ARRAYS:
-        if key in first:
-            merged[key] = torch.cat([state[key] for state in states])
-    return merged
-
-
-def split_sim_state(state: dict[str, Any], sizes: Sequence[int]) -> list[dict[str, Any]]:
-    """The inverse of :func:`merge_sim_states`: one snapshot per slice of ``sizes``
-    simulations.
-
-    Raises:
-        ValueError: if ``sizes`` do not add up to the snapshot's ``num_envs``.
-    """
-    if sum(sizes) != state.get("num_envs"):
-        raise ValueError(f"snapshot num_envs is {state.get('num_envs')!r}, this env has "
-                         f"{sum(sizes)}: restore into an env built with the same arguments")
-    parts, start = [], 0
-    for size in sizes:
-        part = dict(state, num_envs=size)
-        for key in ("seeds", "step_counts", "sub_envs", *SNAPSHOT_ARRAYS):
-            if key in state:
-                part[key] = state[key][start:start + size]
-        parts.append(part)
-        start += size
-    return parts
-
-
 def _build_physics(config: TaskConfig, num_envs: int, *, share_renderers: bool) -> list[Physics]:
     """Compile the scene once; the other physics share its ``MjModel`` (and, for pixels, its
     camera renderers: one GL context renders every sub-environment's data in turn)."""
@@ -484,6 +431,5 @@ def make_env(task: str | Path, *, num_envs: int = 1, observation: str = "pixels"
                                  history=history, history_stride=history_stride, device=device)
 
 
-__all__ = ["TERMINATIONS", "BatchedLaneKeepingEnv", "MirroredTeacherFlag", "make_env",
-           "merge_sim_states",
-           "split_sim_state", "sub_env_seeds"]
+__all__ = ["SNAPSHOT_ARRAYS", "TERMINATIONS", "BatchedLaneKeepingEnv", "MirroredTeacherFlag",
+           "make_env", "merge_sim_states", "split_sim_state", "sub_env_seeds"]

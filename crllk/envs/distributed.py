@@ -38,7 +38,8 @@ import torch
 from tensordict import TensorDict, TensorDictBase
 from torchrl.envs.utils import ExplorationType
 
-from crllk.envs.batched import BatchedLaneKeepingEnv, MirroredTeacherFlag
+from crllk.envs.batched import BatchedLaneKeepingEnv
+from crllk.envs.workers import MirroredTeacherFlag
 from crllk.network import RAY_LOCAL_ONLY, is_loopback
 
 CPUS_PER_COLLECTOR = 1

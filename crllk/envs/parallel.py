@@ -16,7 +16,7 @@ parent stops them.
 
 Workers are built by a picklable factory (a module-level function and its keyword arguments per
 worker). :meth:`~ParallelLaneKeepingEnv.sim_state` gathers the workers' snapshots into the one
-snapshot a one-process env would take (:func:`~crllk.envs.batched.merge_sim_states`), and
+snapshot a one-process env would take (:func:`~crllk.envs.workers.merge_sim_states`), and
 :meth:`~ParallelLaneKeepingEnv.load_sim_state` hands each worker its slice.
 """
 
@@ -36,13 +36,8 @@ import torch
 from tensordict import TensorDict, TensorDictBase
 from torchrl.envs import EnvBase
 
-from crllk.envs.batched import (
-    BatchedLaneKeepingEnv,
-    MirroredTeacherFlag,
-    merge_sim_states,
-    split_sim_state,
-    sub_env_seeds,
-)
+from crllk.envs.batched import BatchedLaneKeepingEnv, sub_env_seeds
+from crllk.envs.workers import MirroredTeacherFlag, merge_sim_states, split_sim_state
 from crllk.errors import ConfigError, MapError
 
 ANSWER_TIMEOUT_S = 600.0
