@@ -8,6 +8,10 @@ intersections) and reports ``cost_<name>`` for each constraint the task declares
 (``constraints``). The episode terminates (discount 0) when a footprint check point leaves the
 road (also past a dead end of an open road), the chassis touches an obstacle or the physics
 diverges; the 512-step time limit is a truncation.
+
+It stays one file, over 350 lines: the task is one dm-control ``Task`` whose spawn, step, cost
+and observation hooks all read and write the same episode state (:class:`EpisodeState`), and it
+reads top to bottom as a task of dm_control's suite does.
 """
 
 from __future__ import annotations
