@@ -21,6 +21,9 @@ from omegaconf import DictConfig, OmegaConf
 from crllk.protocol import VALIDATION_EPISODES, VALIDATION_SEED
 from crllk.rl.model_config import ModelConfig
 from crllk.settings import (
+    MAX_EPISODES,
+    MAX_SIMULATIONS,
+    at_most,
     host_port,
     non_negative,
     one_of,
@@ -181,9 +184,9 @@ class EvalConfig:
     final: bool = True
     """An evaluation at the end of training: the last row of ``eval.csv``, and the run's
     ``eval.json`` from ``python -m crllk.train``."""
-    episodes: int = setting(VALIDATION_EPISODES, check=positive)
+    episodes: int = setting(VALIDATION_EPISODES, check=at_most(MAX_EPISODES))
     """Episodes of the sampled policy each time: the same as ``python -m crllk.evaluate``."""
-    num_envs: int = setting(10, check=positive)
+    num_envs: int = setting(10, check=at_most(MAX_SIMULATIONS))
     """Episode k runs in simulation k mod num_envs, as ``crllk.evaluate``'s default."""
     seed: int = setting(VALIDATION_SEED, check=spawn_seed)
     """Spawn seed of the evaluation environment: a validation seed, apart from the training
@@ -208,7 +211,7 @@ class TrainConfig:
     """Continue the run in ``run_dir`` from its last checkpoint."""
     task_file: str | None = None
     """Path of a task or Duckietown map file; used instead of ``task=`` when set."""
-    num_envs: int = setting(16, check=positive)
+    num_envs: int = setting(16, check=at_most(MAX_SIMULATIONS))
     """Simulations stepped together (split evenly among ``workers`` processes)."""
     workers: int = setting(1, check=positive)
     """Processes that collect from the simulations (obs=pixels and obs=state: 2); num_envs is
@@ -314,15 +317,16 @@ def register_schema(store: ConfigStore) -> None:
     store.store(name=SCHEMA_NAME, node=TrainConfig)
 
 
-def validate(cfg: DictConfig | dict[str, Any]) -> TrainConfig:
-    """A typed, range-checked :class:`TrainConfig` from a composed config.
+def validate(cfg: DictConfig | dict[str, Any], source: str | Path = SOURCE) -> TrainConfig:
+    """A typed, range-checked :class:`TrainConfig` from a composed config (``source``: where it
+    came from, for the messages: the command line's overrides, or a run's ``config.yaml``).
 
     Raises:
         ConfigError: naming the first field that is missing, of the wrong type or out of range.
     """
     if isinstance(cfg, DictConfig):  # plain values: a learner's options are checked by its
         cfg = OmegaConf.to_container(cfg)  # own module (crllk.algos)
-    return parse(TrainConfig, cfg, SOURCE)
+    return parse(TrainConfig, cfg, str(source))
 
 
 def algo_thresholds(name: str = "crllk") -> dict[str, float]:
@@ -332,15 +336,5 @@ def algo_thresholds(name: str = "crllk") -> dict[str, float]:
     return {key: float(value["threshold"]) for key, value in group["constraints"].items()}
 
 
-def upgrade(stored: DictConfig) -> DictConfig:
-    """A run's saved ``config.yaml`` in the current layout: multipliers that an older version
-    kept at ``algo.lane`` and ``algo.collision`` move to ``algo.constraints.<name>``."""
-    algo = stored.get("algo")
-    if algo is not None and "constraints" not in algo:
-        moved = {name: algo.pop(name) for name in ("lane", "collision") if name in algo}
-        algo["constraints"] = moved
-    return stored
-
-
-__all__ = ["CLUSTER_EXTRA", "ConstraintConfig", "TrainConfig",
-           "algo_thresholds", "register_schema", "upgrade", "validate"]
+__all__ = ["CLUSTER_EXTRA", "ConstraintConfig", "TrainConfig", "algo_thresholds",
+           "register_schema", "validate"]

@@ -56,7 +56,9 @@ class ConvertConfig:
 
     def problems(self) -> Iterator[tuple[str, str]]:
         path = Path(self.path)
-        if not path.exists():
+        if path.is_dir() and (folder := path / CHECKPOINT_FILE.parent).is_symlink():
+            yield "path", f"{folder} is a symbolic link, which is not followed (remove it)"
+        elif not path.exists():
             yield "path", f"no such file or run directory: {path}"
         elif path.is_dir() and not run_files(path):
             yield "path", (f"{path} holds neither {POLICY_FILE} nor "

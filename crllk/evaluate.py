@@ -40,7 +40,10 @@ from crllk.errors import ConfigError
 from crllk.files import WriteError, atomic_write_text, write_problem
 from crllk.protocol import VALIDATION_SEED
 from crllk.settings import (
+    MAX_EPISODES,
+    MAX_SIMULATIONS,
     at_least_one,
+    at_most,
     file_stem,
     non_negative,
     one_of,
@@ -73,20 +76,20 @@ class EvaluateConfig:
     the policy in training."""
     margin: float = setting(FollowerGains.avoid_margin, check=non_negative)
     """The gap (m) the teacher keeps beside the obstacles it passes (a run's ``teacher.margin``)."""
-    episodes: int = setting(100, check=at_least_one)
+    episodes: int = setting(100, check=at_most(MAX_EPISODES))
     deterministic: bool = False
     """The policy's mode instead of sampled actions."""
     seed: int | None = setting(None, check=spawn_seed)
     """Spawn and sampling seed (default: the run's ``eval.seed``, a validation seed; the test
     seed is refused, :mod:`crllk.protocol`)."""
-    num_envs: int = setting(10, check=at_least_one)
+    num_envs: int = setting(10, check=at_most(MAX_SIMULATIONS))
     """Episode k runs in simulation k mod num_envs."""
     threads: int = setting(1, check=at_least_one)
     out: str | None = None
     """Also write every result (and the aggregate) to this JSON file."""
     record: bool = False
     """Record ``record_episodes`` episodes of each run to ``<run>/recordings/eval.rrd``."""
-    record_episodes: int = setting(1, check=at_least_one)
+    record_episodes: int = setting(1, check=at_most(MAX_EPISODES))
     viewer: str = setting("none", check=one_of("none", "spawn", "serve"))
     overrides: dict[str, Any] = field(default_factory=dict)
     """Task settings changed for this evaluation, e.g. ``overrides.randomize=default`` or

@@ -98,7 +98,10 @@ class LaneKeepingEnv(gymnasium.Env):
                 raise ValueError(f"action: expected a whole number from 0 to "
                                  f"{self.action_space.n - 1}, got {action!r}")
             return int(action)
-        value = np.asarray(action, dtype=np.float32)
+        try:
+            value = np.asarray(action, dtype=np.float32)
+        except (TypeError, ValueError):
+            value = np.full(0, np.nan, dtype=np.float32)  # refused just below
         if value.shape != self.action_space.shape or not np.isfinite(value).all():
             raise ValueError(f"action: expected {self.action_space.shape[0]} finite numbers, "
                              f"got {action!r}")

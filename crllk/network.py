@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import ipaddress
 import os
+import re
 from collections.abc import Sequence
 
 LOOPBACK = "127.0.0.1"
@@ -12,7 +13,9 @@ RAY_LOCAL_ONLY = {"RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER": "0"}
 """Without it Ray on Linux replaces 127.0.0.1 by the machine's address and listens on every
 interface."""
 RAY_LAUNCHER = "hydra/launcher=ray_local"
-"""The Hydra launcher choice that starts (or joins) Ray for a sweep."""
+"""The project's Hydra launcher choice that starts (or joins) Ray for a sweep."""
+_RAY_LAUNCHER_CHOICE = re.compile(r"^\+{0,2}hydra/launcher=.*ray")
+"""Any launcher choice of Ray: the project's, or the plugin's own (``hydra/launcher=ray``)."""
 
 
 def is_loopback(host: str) -> bool:
@@ -26,10 +29,11 @@ def is_loopback(host: str) -> bool:
 
 
 def keep_ray_launcher_local(argv: Sequence[str]) -> bool:
-    """For a sweep on :data:`RAY_LAUNCHER`: sets :data:`RAY_LOCAL_ONLY` in this process's
-    environment before Ray is imported, unless the user set the variable (a user who exports
-    ``RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER=1`` asks for every interface). Returns whether it did."""
-    if RAY_LAUNCHER not in argv:
+    """For a sweep on a Ray launcher (:data:`RAY_LAUNCHER`, or the plugin's own ``ray``): sets
+    :data:`RAY_LOCAL_ONLY` in this process's environment before Ray is imported, unless the
+    user set the variable (a user who exports ``RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER=1`` asks for
+    every interface). Returns whether it did."""
+    if not any(_RAY_LAUNCHER_CHOICE.match(argument) for argument in argv):
         return False
     changed = False
     for key, value in RAY_LOCAL_ONLY.items():

@@ -16,6 +16,7 @@ import math
 from collections.abc import Callable, Iterable, Mapping
 from typing import Any, TypeVar
 
+import yaml
 from omegaconf import MISSING, OmegaConf
 from omegaconf.errors import ConfigKeyError, OmegaConfBaseException
 
@@ -40,9 +41,27 @@ def non_negative(value: float) -> str | None:
     return None if value >= 0 else "must be >= 0"
 
 
+MAX_SEED = 2**32 - 1
+"""Largest seed (numpy's and torch's generators take it whole)."""
+MAX_EPISODES = 1_000_000
+"""Most episodes one evaluation plays (over a week of simulation per evaluation)."""
+MAX_SIMULATIONS = 1024
+"""Most simulations stepped together (each holds a MuJoCo model and its renderer)."""
+
+
 def spawn_seed(value: int) -> str | None:
-    """A seed of training or of a validation evaluation: not negative, not the test seed."""
+    """A seed of training or of a validation evaluation: not negative, at most
+    :data:`MAX_SEED`, not the test seed."""
+    if value > MAX_SEED:
+        return f"must be at most {MAX_SEED} (2**32 - 1)"
     return non_negative(value) or reserved_seed_problem(value)
+
+
+def at_most(limit: int) -> Check:
+    """At least 1 and at most ``limit``."""
+    def check_range(value: int) -> str | None:
+        return at_least_one(value) or (None if value <= limit else f"must be at most {limit}")
+    return check_range
 
 
 def at_least_one(value: int) -> str | None:
@@ -116,9 +135,20 @@ def parse_dotlist(schema: type[Settings], arguments: Iterable[str], source: str)
             raise ConfigError(source, argument, "expected key=value")
     try:
         values = OmegaConf.from_dotlist(arguments)
-    except OmegaConfBaseException as err:
-        raise ConfigError(source, "<arguments>", str(err).splitlines()[0]) from None
+    except (OmegaConfBaseException, yaml.YAMLError, ValueError) as err:
+        raise ConfigError(source, _unreadable_argument(arguments), " ".join(
+            str(err).split()[:24]) or type(err).__name__) from None
     return parse(schema, values, source)
+
+
+def _unreadable_argument(arguments: list[str]) -> str:
+    """The first ``key=value`` whose value does not parse (its key), else ``<arguments>``."""
+    for argument in arguments:
+        try:
+            OmegaConf.from_dotlist([argument])
+        except (OmegaConfBaseException, yaml.YAMLError, ValueError):
+            return argument.split("=", 1)[0]
+    return "<arguments>"
 
 
 def check(settings: Any, source: str, prefix: str = "") -> None:

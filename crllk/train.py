@@ -13,13 +13,14 @@ from __future__ import annotations
 import sys
 
 import hydra
-from omegaconf import DictConfig, OmegaConf
+from omegaconf import DictConfig
 
 import crllk  # noqa: F401  (chooses the headless GL backend before torchrl imports mujoco)
 from crllk.cli import exit_status
-from crllk.config import TrainConfig, upgrade, validate
+from crllk.config import TrainConfig, validate
 from crllk.errors import ConfigError
 from crllk.network import keep_ray_launcher_local
+from crllk.saved_config import read_run_config
 from crllk.training.compose import (
     compose_config,
     launcher_problems,
@@ -38,12 +39,12 @@ def resolve_config(cfg: DictConfig) -> TrainConfig:
     config = validate(cfg)
     saved = config.resolved_run_dir() / "config.yaml"
     if config.resume and saved.exists():
-        stored = upgrade(OmegaConf.load(saved))
+        stored = read_run_config(saved)
         for key in RESUME_KEEPS:
             stored[key] = getattr(config, key)
         stored["resume"] = True
         stored["run_dir"] = str(config.resolved_run_dir())
-        config = validate(stored)
+        config = validate(stored, source=saved)
     return config
 
 

@@ -25,7 +25,8 @@ class _UniqueKeyLoader(yaml.SafeLoader):
         added = _expanded_nodes(node) - _distinct_nodes(node)
         if added > MAX_ALIAS_NODES:
             raise _AliasExpansionError(f"its aliases expand to {added} more nodes, over the "
-                                       f"{MAX_ALIAS_NODES} a task or map file may add")
+                                       f"{MAX_ALIAS_NODES} a task, map or run configuration "
+                                       "file may add")
         return super().construct_document(node)
 
     def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict:
@@ -92,8 +93,8 @@ def read_yaml(path: Path) -> object:
     try:
         size = path.stat().st_size
         if size > MAX_YAML_BYTES:
-            raise MapError(path, "<file>", f"{size} bytes, more than the {MAX_YAML_BYTES} a task "
-                           "or map file may have")
+            raise MapError(path, "<file>", f"{size} bytes, more than the {MAX_YAML_BYTES} a task, "
+                           "map or run configuration file may have")
         return yaml.load(path.read_text(encoding="utf-8"), Loader=_UniqueKeyLoader)
     except UnicodeDecodeError as err:
         raise MapError(path, "<file>", f"not a text file (UTF-8): byte {err.start} cannot be "

@@ -248,8 +248,9 @@ def test_map_warnings_are_one_line(tmp_path):
 
 
 def test_a_ray_launcher_sweep_keeps_ray_on_loopback(monkeypatch):
-    """``-m hydra/launcher=ray_local``: the trainer sets the variable that keeps Ray on
-    127.0.0.1 before Ray is imported, and leaves a value the user set alone."""
+    """``-m hydra/launcher=ray_local`` (or the plugin's own ``ray``): the trainer sets the
+    variable that keeps Ray on 127.0.0.1 before Ray is imported, and leaves a value the user
+    set alone."""
     from crllk.network import RAY_LOCAL_ONLY, keep_ray_launcher_local
 
     (key, local), = RAY_LOCAL_ONLY.items()
@@ -258,6 +259,10 @@ def test_a_ray_launcher_sweep_keeps_ray_on_loopback(monkeypatch):
     assert key not in os.environ
     assert keep_ray_launcher_local(["-m", "hydra/launcher=ray_local", "seed=0,1"])
     assert os.environ[key] == local
+    for plugin_s_own in ("hydra/launcher=ray", "+hydra/launcher=ray_aws"):
+        monkeypatch.delenv(key)
+        assert keep_ray_launcher_local(["-m", plugin_s_own, "seed=0,1"])
+        assert os.environ[key] == local
     monkeypatch.setenv(key, "1")
     assert not keep_ray_launcher_local(["-m", "hydra/launcher=ray_local"])
     assert os.environ[key] == "1"

@@ -19,7 +19,7 @@ LAYERS = (
     ("crllk.sim",),
     ("crllk.tasks",),
     ("crllk.envs", "crllk.gym"),
-    ("crllk.rl", "crllk.config"),
+    ("crllk.rl", "crllk.config", "crllk.saved_config"),
     ("crllk.recording",),
     ("crllk.algos",),
     ("crllk.training",),

@@ -6,12 +6,14 @@ row cut short by a kill never survives a resume, and settings are never silently
 from __future__ import annotations
 
 import errno
+import itertools
 import json
 import os
 import shutil
 import subprocess
 import sys
 import time
+from functools import partial
 from pathlib import Path
 
 import pytest
@@ -25,7 +27,7 @@ from tiny_runs import (
     run_in_process,
 )
 
-from crllk import evaluate, export
+from crllk import convert, evaluate, export
 from crllk.cli import exit_status, one_line
 from crllk.errors import ConfigError, MapError
 from crllk.evaluation.runs import evaluate_run, record_run
@@ -386,3 +388,91 @@ def test_export_wants_an_onnx_file(tiny_run, tmp_path, capsys):
         [f"run={tiny_run}", f"out={tmp_path / 'policy.txt'}"])))
     assert "export: out: must end in .onnx" in err
     assert not (tmp_path / "policy.txt").exists()
+
+
+# ----- planted folders, run configurations, damaged logs -------------------------------------
+def _bomb(depth: int = 7) -> str:
+    """Nested anchors of a few hundred bytes that expand to millions of nodes."""
+    parts = ["a: &a [lol,lol,lol,lol,lol,lol,lol,lol,lol]"]
+    names = "abcdefgh"[:depth]
+    parts += [f"{b}: &{b} [" + ",".join([f"*{a}"] * 9) + "]"
+              for a, b in itertools.pairwise(names)]
+    return "\n".join(parts) + "\n"
+
+
+def test_a_run_configuration_is_read_with_the_task_files_limits(tiny_run, tmp_path, capsys):
+    """A run's ``config.yaml`` with an alias bomb is refused in one line (OmegaConf alone ran
+    for minutes), and a bad key in it is named with the file, not as an override."""
+    run = tmp_path / "bombed"
+    shutil.copytree(tiny_run, run)
+    config = run / "config.yaml"
+    saved = config.read_text()
+    config.write_text(_bomb() + saved)
+    for main, extra in ((evaluate.main, ["episodes=1"]), (export.main, [])):
+        err = _one_line_error(capsys, exit_status(partial(main, [f"run={run}", *extra])))
+        assert f"{config}: <file>: its aliases expand to" in err and len(err) < 300
+    config.write_text(saved + "no_such_setting: 1\n")
+    err = _one_line_error(capsys, evaluate.main([f"run={run}", "episodes=1"]))
+    assert err == f"error: {config}: no_such_setting: no such setting"
+
+
+def test_planted_run_folders_are_refused_not_followed(tiny_run, tmp_path, capsys):
+    """``checkpoints/`` or ``recordings/`` planted as a link to a folder elsewhere: every
+    command that writes there refuses the run in one line, and nothing lands in the folder."""
+    for name in ("checkpoints", "recordings"):
+        run = tmp_path / f"planted-{name}"
+        shutil.copytree(tiny_run, run, ignore=shutil.ignore_patterns(name))
+        target = tmp_path / f"elsewhere-{name}"
+        target.mkdir()
+        _plant(run / name, target)
+        expected = f"{run / name}: <folder>: is a symbolic link, which is not followed"
+        err = _one_line_error(capsys, evaluate.main([f"run={run}", "episodes=1", "record=true"]))
+        assert expected in err
+        err = _one_line_error(capsys, _train(run, "resume=true", iterations=2))
+        assert expected in err
+        assert list(target.iterdir()) == []
+    err = _one_line_error(capsys, exit_status(
+        lambda: convert.main([f"path={tmp_path / 'planted-checkpoints'}"])))
+    assert "checkpoints is a symbolic link, which is not followed" in err
+
+
+def test_a_log_whose_header_is_not_the_run_s_is_named_not_emptied(tmp_path, capsys):
+    """Resuming with a damaged ``metrics.csv`` header used to drop every row it could not
+    read, or fail with a bare ValueError for an extra column."""
+    run_dir = tmp_path / "run"
+    assert _train(run_dir, iterations=2) == 0
+    log = run_dir / "metrics.csv"
+    rows = log.read_text()
+    for header in (rows.replace("iteration,", "iterat0n,", 1),
+                   rows.replace("\n", ",zz\n", 1)):
+        log.write_text(header)
+        err = _one_line_error(capsys, _train(run_dir, "resume=true", iterations=3))
+        assert f"{log}: <header>: not this run's log" in err
+        assert log.read_text() == header
+
+
+def test_a_file_torch_did_not_write_is_named_as_such(tiny_run, tmp_path, capsys):
+    run = tmp_path / "text"
+    shutil.copytree(tiny_run, run)
+    (run / "checkpoints" / "last.pt").write_text("hello\n")
+    err = _one_line_error(capsys, evaluate.main([f"run={run}", "episodes=1"]))
+    assert err == (f"error: {run / 'checkpoints' / 'last.pt'}: <file>: not a checkpoint: "
+                   "neither the zip archive torch.save writes nor a pickle")
+
+
+@pytest.mark.parametrize(("argument", "problem"), [
+    ("seed=999999999999999999999", "seed: must be at most 4294967295 (2**32 - 1)"),
+    ("episodes=99999999999999999999999", "episodes: must be at most 1000000"),
+    ("num_envs=99999999999", "num_envs: must be at most 1024"),
+    ("overrides={a: 1", "overrides: while parsing a flow mapping"),
+])
+def test_evaluate_bounds_its_numbers_and_names_an_unreadable_value(tiny_run, capsys, argument,
+                                                                  problem):
+    err = _one_line_error(capsys, evaluate.main([f"run={tiny_run}", argument]))
+    assert err.startswith(f"error: evaluate: {problem}")
+
+
+def test_a_seed_too_large_is_refused_before_training(tmp_path, capsys):
+    err = _one_line_error(capsys, _train(tmp_path / "run", "eval.seed=99999999999999999999"))
+    assert "eval.seed: must be at most 4294967295" in err
+    assert not (tmp_path / "run").exists()

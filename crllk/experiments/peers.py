@@ -42,6 +42,7 @@ from crllk.experiments.tables import invocation, invocation_note, settings_dict,
 from crllk.files import read_csv_rows
 from crllk.paths import SOURCE_ROOT
 from crllk.protocol import TEST_EVALUATION, TEST_MODE_EVALUATION
+from crllk.saved_config import read_run_config
 
 TASKS = ("small_loop", "obstacle_loop")
 PEER_ALGOS = ("PPOLag", "CPPOPID")
@@ -194,9 +195,7 @@ def aids_of(run_dir: Path) -> str:
     config = run_dir / "config.yaml"
     if not config.is_file():
         return "none"
-    from omegaconf import OmegaConf
-
-    stored = OmegaConf.load(config)
+    stored = read_run_config(config)
     aids = []
     if float(stored.get("encounters", 0) or 0) > 0 and _has_obstacles(stored):
         aids.append(f"encounter spawns {float(stored.encounters):g}")

@@ -21,18 +21,20 @@ import numpy as np
 from PIL import Image
 
 from crllk.errors import ConfigError
-from crllk.images import box_average, decode_image
+from crllk.images import box_average, check_frame_pixels, decode_image
 
 POLICY_IMAGE = (30, 40)
 """Height and width (pixels) of the policy's camera image."""
 
 
 def decode(frame: bytes | np.ndarray, source: str = "frame") -> np.ndarray:
-    """An RGB uint8 H×W×3 array from JPEG (or PNG) bytes or an array (H×W×3 or H×W×4).
+    """An RGB uint8 H×W×3 array from JPEG (or PNG) bytes or an array (H×W×3, or H×W×4 whose
+    alpha is dropped), either at most :data:`crllk.images.MAX_FRAME_PIXELS`.
 
     Raises:
         ConfigError: for bytes that are no image or too large an image
-            (:func:`crllk.images.decode_image`), or an array of another shape or type.
+            (:func:`crllk.images.decode_image`), or an array of another shape or type, or
+            larger.
     """
     if isinstance(frame, bytes | bytearray | memoryview):
         return decode_image(bytes(frame), source)
@@ -40,6 +42,7 @@ def decode(frame: bytes | np.ndarray, source: str = "frame") -> np.ndarray:
     if array.ndim != 3 or array.shape[2] not in (3, 4) or array.dtype != np.uint8:
         raise ConfigError(source, "frame", "expected RGB uint8 of shape (height, width, 3), got "
                           f"{array.dtype} of shape {array.shape}")
+    check_frame_pixels(array.shape[1], array.shape[0], source)
     return array[:, :, :3]
 
 

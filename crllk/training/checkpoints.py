@@ -75,7 +75,12 @@ def read_state(path: str | Path, *, trust: bool = False) -> object:
     """
     path = Path(path)
     try:
+        if not _looks_saved_by_torch(path):
+            raise ConfigError(path, "<file>", "not a checkpoint: neither the zip archive "
+                              "torch.save writes nor a pickle")
         return torch.load(path, map_location="cpu", weights_only=not trust)
+    except ConfigError:
+        raise
     except OSError as err:
         raise ConfigError(path, "<file>", f"cannot read: {err.strerror or err}") from None
     except pickle.UnpicklingError as err:
@@ -90,6 +95,14 @@ def read_state(path: str | Path, *, trust: bool = False) -> object:
     except Exception as err:  # torch raises RuntimeError, pickle errors, EOFError...
         raise ConfigError(path, "<file>", f"not a readable checkpoint (damaged or truncated: "
                           f"{_first_line(err)})") from None
+
+
+def _looks_saved_by_torch(path: Path) -> bool:
+    """Whether the file starts as a format ``torch.save`` writes does (damaged or not): its zip
+    archive (a local file header), or a pickle (the protocol byte 0x80)."""
+    with path.open("rb") as handle:
+        start = handle.read(4)
+    return start == b"PK\x03\x04" or start[:1] == b"\x80"
 
 
 def _first_line(err: BaseException) -> str:

@@ -15,6 +15,7 @@ from tensordict import TensorDictBase
 
 import crllk  # noqa: F401  (chooses the headless GL backend before torchrl imports mujoco)
 from crllk.config import TrainConfig
+from crllk.errors import ConfigError
 from crllk.files import atomic_write_text, open_no_follow, read_csv_rows, writing
 from crllk.tasks.constraints import Constraint
 
@@ -44,10 +45,20 @@ class CsvLog:
 
     def truncate_after(self, iteration: int) -> None:
         """Drops rows of iterations after ``iteration`` (written after the last checkpoint) and
-        a last row that a kill cut short (:func:`crllk.files.read_csv_rows`)."""
+        a last row that a kill cut short (:func:`crllk.files.read_csv_rows`).
+
+        Raises:
+            ConfigError: naming the file, if its header is not one this log writes (damaged,
+                or another file's), instead of dropping rows it cannot read.
+        """
         header, rows = read_csv_rows(self.path)
         if not header:
             return
+        unknown = [column for column in header if column not in self.columns]
+        if unknown or "iteration" not in header:
+            what = f"unknown columns {', '.join(unknown[:4])}" if unknown else "no iteration"
+            raise ConfigError(self.path, "<header>", f"not this run's log ({what}): restore "
+                              "the file, or remove it to resume without the run's history")
         kept = [r for r in rows if _iteration(r) is not None and _iteration(r) <= iteration]
         buffer = io.StringIO()
         writer = csv.DictWriter(buffer, fieldnames=self.columns, lineterminator="\r\n")

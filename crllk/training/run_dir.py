@@ -34,6 +34,22 @@ RUN_LOCK = ".lock"
 """The trainer's lock file in a run directory."""
 EVAL_RECORDING = Path("recordings") / "eval.rrd"
 """Where ``python -m crllk.evaluate record=true`` records a run's episodes, in its directory."""
+RUN_FOLDERS = ("checkpoints", "recordings")
+"""The folders the commands write in inside a run directory."""
+
+
+def check_run_folders(run_dir: Path) -> None:
+    """Refuses a run directory whose :data:`RUN_FOLDERS` are symbolic links: the commands
+    write there, and a link planted in a shared run would send their files elsewhere.
+
+    Raises:
+        ConfigError: naming the folder.
+    """
+    for name in RUN_FOLDERS:
+        folder = Path(run_dir) / name
+        if folder.is_symlink():
+            raise ConfigError(folder, "<folder>", "is a symbolic link, which is not followed "
+                              "(remove it)")
 
 
 def lock_run_dir(run_dir: Path) -> IO[bytes]:
@@ -46,6 +62,7 @@ def lock_run_dir(run_dir: Path) -> IO[bytes]:
     """
     if run_dir.exists() and not run_dir.is_dir():
         raise ConfigError(SOURCE_RUN, "run_dir", f"{run_dir} is a file, not a directory")
+    check_run_folders(run_dir)
     try:
         run_dir.mkdir(parents=True, exist_ok=True)
         return lock_file(run_dir / RUN_LOCK, wait=False)

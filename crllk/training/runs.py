@@ -17,12 +17,11 @@ from typing import Any
 
 import numpy as np
 import torch
-from omegaconf import OmegaConf
-from omegaconf.errors import OmegaConfBaseException
 
-from crllk.config import TrainConfig, upgrade, validate
+from crllk.config import TrainConfig, validate
 from crllk.errors import ConfigError
 from crllk.files import read_csv_rows
+from crllk.saved_config import read_run_config
 from crllk.training.checkpoints import (
     POLICY_FILE,
     load_checkpoint,
@@ -30,6 +29,7 @@ from crllk.training.checkpoints import (
     policy_state,
     save_checkpoint,
 )
+from crllk.training.run_dir import check_run_folders
 
 CONFIG_FILE = "config.yaml"
 CHECKPOINT_FILE = Path("checkpoints") / "last.pt"
@@ -45,12 +45,10 @@ def load_run_config(run_dir: str | Path) -> TrainConfig:
     path = Path(run_dir) / CONFIG_FILE
     if not path.is_file():
         raise ConfigError(run_dir, "run", f"not a run directory (no {CONFIG_FILE})")
-    try:
-        stored = OmegaConf.load(path)
-    except (OmegaConfBaseException, OSError, ValueError) as err:
-        raise ConfigError(path, "<file>", f"unreadable: {err}") from None
+    check_run_folders(Path(run_dir))
+    stored = read_run_config(path)
     stored["run_dir"] = str(run_dir)
-    return validate(upgrade(stored))
+    return validate(stored, source=path)
 
 
 def has_policy(run_dir: str | Path) -> bool:
