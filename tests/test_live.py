@@ -61,6 +61,23 @@ def test_iterations_and_recordings_land_on_the_iteration_timeline(tmp_path):
     assert "world/robot/camera/image" in chunks and "world/map/tiles" in chunks
 
 
+def test_the_plots_are_the_learner_s_own_diagnostics(tmp_path):
+    """SAC-Lagrangian's losses get plots, PPO's do not (they are not in its metrics.csv)."""
+    sac = ["loss_actor", "loss_qvalue", "loss_alpha", "alpha"]
+    names = live_series(CONSTRAINTS, sac)
+    assert [c for c in names if c.startswith("loss_")] == ["loss_actor", "loss_qvalue",
+                                                            "loss_alpha"]
+    assert (names["loss_qvalue"], names["alpha"], names["frames_per_s"]) == \
+        ("Q-value loss", "alpha", "frames/s")
+    view = LiveView([rr.FileSink(tmp_path / "live.rrd")], "live-sac", CONSTRAINTS, THRESHOLDS,
+                    diagnostics=sac)
+    view.log_iteration({"iteration": 1, **dict.fromkeys(names, 0.5)})
+    view.close()
+    chunks = read_recording(tmp_path / "live.rrd")
+    assert series(chunks, PREFIX + "loss_qvalue") == {1: 0.5}
+    assert PREFIX + "loss_objective" not in chunks
+
+
 def test_a_missing_recording_is_a_warning(tmp_path, capsys):
     view = LiveView([rr.FileSink(tmp_path / "live.rrd")], "live-test", CONSTRAINTS, THRESHOLDS)
     view.add_recording(tmp_path / "gone.rrd")

@@ -36,19 +36,28 @@ LIVE_PORT = 9877
 APPLICATION_ID = "crllk-train"
 """Viewers keep one layout per application: the live view's apart from recordings'."""
 PREFIX = "train/"
-LOSS_SERIES = {"loss_objective": "policy loss", "loss_critic": "critic loss",
-               "loss_cost_critic": "cost critic loss", "loss_entropy": "entropy loss",
-               "loss_imitation": "imitation loss", "frames_per_s": "frames/s"}
+PPO_DIAGNOSTICS = ("loss_objective", "loss_critic", "loss_cost_critic", "loss_entropy",
+                   "loss_imitation")
+"""PPO-Lagrangian's diagnostics: the live view's default (a learner names its own)."""
+SERIES_NAMES = {"loss_objective": "policy loss", "loss_critic": "critic loss",
+                "loss_cost_critic": "cost critic loss", "loss_entropy": "entropy loss",
+                "loss_imitation": "imitation loss", "loss_actor": "policy loss",
+                "loss_qvalue": "Q-value loss", "loss_alpha": "temperature loss",
+                "frames_per_s": "frames/s"}
+"""Plot names of the diagnostics that have one; any other is plotted under its column name."""
 THRESHOLD = "threshold"
 """``train/<metric>/threshold`` (``train/J_clane/threshold``, ...): the constraint bounds."""
 
 
-def series(constraints: Sequence[Constraint]) -> dict[str, str]:
+def series(constraints: Sequence[Constraint],
+           diagnostics: Sequence[str] = PPO_DIAGNOSTICS) -> dict[str, str]:
     """Columns of ``metrics.csv`` logged at ``train/<column>``, with their plot names: J_R,
-    each constraint's metric and multiplier, the losses, frames/s."""
+    each constraint's metric and multiplier, the learner's ``diagnostics`` (its losses,
+    :attr:`crllk.algos.base.Learner.diagnostic_names`), frames/s."""
     return {"J_R": "J_R (m)",
             **{c.metric: f"{c.metric} ({c.unit})" for c in constraints},
-            **{f"lambda_{c.name}": f"λ_{c.name}" for c in constraints}, **LOSS_SERIES}
+            **{f"lambda_{c.name}": f"λ_{c.name}" for c in constraints},
+            **{name: SERIES_NAMES.get(name, name) for name in (*diagnostics, "frames_per_s")}}
 _SERVER_MEMORY = "512MiB"
 """The server keeps at most this much of the run for viewers that connect later."""
 _THRESHOLD_RGB = (160, 160, 160)
@@ -59,14 +68,15 @@ def live_url(port: int) -> str:
     return f"rerun+http://{VIEWER_HOST}:{port}/proxy"
 
 
-def live_blueprint(constraints: Sequence[Constraint]) -> rrb.Blueprint:
+def live_blueprint(constraints: Sequence[Constraint],
+                   diagnostics: Sequence[str] = PPO_DIAGNOSTICS) -> rrb.Blueprint:
     """The map, a chase view and the camera of the latest evaluation episode with its events on
     the left (:func:`crllk.recording.blueprint.scene_views`); one plot per training series on the
     right; the ``iteration`` timeline, following the newest data."""
     plots = [rrb.TimeSeriesView(origin=PREFIX + column, name=name,
                                 plot_legend=rrb.PlotLegend(visible=False),
                                 axis_x=rrb.TimeAxis(link="LinkToGlobal"))
-             for column, name in series(constraints).items()]
+             for column, name in series(constraints, diagnostics).items()]
     return rrb.Blueprint(
         rrb.Horizontal(scene_views(), rrb.Grid(*plots, grid_columns=3), column_shares=[2, 3]),
         rrb.BlueprintPanel(state="collapsed"), rrb.SelectionPanel(state="collapsed"),
@@ -81,16 +91,19 @@ class LiveView:
         recording_id: the run's recording id.
         constraints: the task's constraints.
         thresholds: their bounds by constraint name (``{"lane": 0.5, "collision": 0.02}``).
+        diagnostics: the learner's diagnostic columns (its losses), one plot each.
     """
 
     def __init__(self, sinks: list, recording_id: str, constraints: Sequence[Constraint],
-                 thresholds: Mapping[str, float], url: str | None = None) -> None:
+                 thresholds: Mapping[str, float], url: str | None = None,
+                 diagnostics: Sequence[str] = PPO_DIAGNOSTICS) -> None:
         self.url = url
-        self.series = series(constraints)
+        self.series = series(constraints, diagnostics)
         self.thresholds = {c.metric: thresholds[c.name] for c in constraints}
         self.rec = rr.RecordingStream(APPLICATION_ID, recording_id=recording_id)
         self.rec.set_sinks(*sinks)
-        self.rec.send_blueprint(live_blueprint(constraints), make_active=True, make_default=True)
+        self.rec.send_blueprint(live_blueprint(constraints, diagnostics), make_active=True,
+                                make_default=True)
         self.rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
         for column, name in self.series.items():
             self.rec.log(PREFIX + column, rr.SeriesLines(names=name), static=True)
@@ -129,7 +142,8 @@ def server_sink(port: int) -> rr.GrpcServerSink:
 
 
 def open_live(mode: str, port: int, recording_id: str, constraints: Sequence[Constraint],
-              thresholds: Mapping[str, float]) -> tuple[LiveView | None, list[str]]:
+              thresholds: Mapping[str, float], diagnostics: Sequence[str] = PPO_DIAGNOSTICS
+              ) -> tuple[LiveView | None, list[str]]:
     """The run's live view served on ``127.0.0.1:port`` (``mode`` ``"serve"``), with a native
     viewer connected to it (``"spawn"``), or None (``"none"``, or the port is taken); the
     problems are warnings for the caller to print."""
@@ -138,7 +152,8 @@ def open_live(mode: str, port: int, recording_id: str, constraints: Sequence[Con
     url = live_url(port)
     try:
         check_port_free(port)  # rerun's server would fail later, in its own thread
-        live = LiveView([server_sink(port)], recording_id, constraints, thresholds, url)
+        live = LiveView([server_sink(port)], recording_id, constraints, thresholds, url,
+                        diagnostics)
     except Exception as err:  # a live view never stops training
         return None, [f"live view unavailable ({VIEWER_HOST}:{port}: {err}); training goes on "
                       "without it"]
@@ -152,5 +167,5 @@ def open_live(mode: str, port: int, recording_id: str, constraints: Sequence[Con
     return live, problems
 
 
-__all__ = ["APPLICATION_ID", "LIVE_PORT", "PREFIX", "THRESHOLD", "LiveView",
+__all__ = ["APPLICATION_ID", "LIVE_PORT", "PPO_DIAGNOSTICS", "PREFIX", "THRESHOLD", "LiveView",
            "live_blueprint", "live_url", "open_live", "series", "server_sink"]

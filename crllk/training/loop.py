@@ -122,7 +122,7 @@ def train(config: TrainConfig, on_final_evaluation: FinalEvaluation | None = Non
         env.teacher_active = learner.needs_teacher(0)
         carry = first_carry(env)
         print(f"run directory: {run_dir}", flush=True)
-    live = open_live_view(config, run_dir, constraints)
+    live = open_live_view(config, run_dir, constraints, learner.diagnostic_names)
 
     bar = tqdm(total=config.total_frames, initial=frames, unit="frame", dynamic_ncols=True,
                disable=not config.progress, file=sys.stderr)
@@ -282,17 +282,18 @@ def evaluate(config: TrainConfig, env: LaneKeepingEnv, learner: Learner, iterati
             "evaluation_s": time.perf_counter() - began}, result
 
 
-def open_live_view(config: TrainConfig, run_dir: Path, constraints: Sequence[Constraint]
-                   ) -> LiveView | None:
-    """The run's live view (``live``), or None; rerun is imported only when it is on. A live
-    view that cannot start is a warning: training goes on."""
+def open_live_view(config: TrainConfig, run_dir: Path, constraints: Sequence[Constraint],
+                   diagnostics: Sequence[str]) -> LiveView | None:
+    """The run's live view (``live``) with a plot per learner ``diagnostics``, or None; rerun
+    is imported only when it is on. A live view that cannot start is a warning: training goes
+    on."""
     if config.live == "none":
         return None
     from crllk.recording.live import live_url, open_live
 
     live, problems = open_live(config.live, config.live_port, f"crllk-live-{run_dir.resolve()}",
                                constraints, {c.name: config.algo.constraints[c.name].threshold
-                                             for c in constraints})
+                                             for c in constraints}, diagnostics)
     for message in problems:
         print(f"warning: {message}", file=sys.stderr, flush=True)
     if live is not None:
