@@ -143,6 +143,7 @@ def screenshot(context, base: str, path: str, out: Path) -> None:
     page = context.new_page()
     page.goto(base + path, wait_until="load")
     page.wait_for_function("Array.from(document.images).every(i => i.complete)")
+    page.wait_for_timeout(1000)  # the header's title fades in after a jump to an anchor
     out.parent.mkdir(parents=True, exist_ok=True)
     page.screenshot(path=str(out))
     page.close()
