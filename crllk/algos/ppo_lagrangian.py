@@ -1,6 +1,6 @@
 """PPO-Lagrangian, the paper's learner (``algo.learner=ppo_lagrangian``).
 
-One update: GAE for the reward and every cost (:func:`crllk.rl.loss.make_advantage_modules`),
+One update: GAE for the reward and every cost (:func:`crllk.rl.advantages.make_advantage_modules`),
 the λ-combination of their advantages (:mod:`crllk.rl.lagrangian_advantage`), then ``ppo.epochs``
 passes of minibatch PPO (:class:`crllk.rl.loss.CriticsPPOLoss`), each network's gradient clipped
 on its own. The multipliers come from the trainer (learned by dual ascent or PID, or frozen at
@@ -19,8 +19,9 @@ from tensordict import TensorDictBase
 from crllk.algos.base import TrainingEnv
 from crllk.algos.schedules import entropy_coeff, imitation_coeff, learning_rate
 from crllk.config import TrainConfig
+from crllk.rl.advantages import AdvantageModules, make_advantage_modules
 from crllk.rl.lagrangian_advantage import LagrangianAdvantage
-from crllk.rl.loss import AdvantageModules, CriticsPPOLoss, make_advantage_modules
+from crllk.rl.loss import CriticsPPOLoss
 from crllk.rl.models import make_actor, make_critic, make_shared_critic
 from crllk.rl.sampling import ActionNoise
 from crllk.tasks.lane_keeping import state_feature_names
