@@ -12,6 +12,7 @@ from crllk.images import MAX_FRAME_BYTES, MAX_FRAME_PIXELS
 from crllk.network import RAY_LOCAL_ONLY
 from crllk.recording.live import LIVE_PORT
 from crllk.recording.viewer import VIEWER_PORT
+from crllk.settings import MAX_SEED
 from crllk.yaml_files import MAX_ALIAS_NODES, MAX_YAML_BYTES
 
 SECTION = " ".join(page("security.md").split())
@@ -27,6 +28,7 @@ def test_the_security_section_quotes_the_limits():
     assert f"(port {VIEWER_PORT})" in SECTION and f"port {LIVE_PORT}, `live_port`" in SECTION
     (variable, value), = RAY_LOCAL_ONLY.items()
     assert f"sets `{variable}={value}`" in SECTION
+    assert MAX_SEED == 2**32 - 1 and "Seeds (at most 2³² − 1)" in SECTION
 
 
 @pytest.mark.parametrize("where", ["sim-to-real.md", "tutorials/deploy.md"])
