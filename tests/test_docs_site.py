@@ -76,6 +76,25 @@ def test_every_page_is_in_the_navigation(site):
         assert built.is_file(), name
 
 
+def test_the_api_reference_has_every_package_and_module(site):
+    """Every package of crllk has its page, listing each of its modules; every module at the
+    top of the package is on a page too (the commands on the pages that describe them)."""
+    from docs_pages import _hook
+
+    packages = {p.parent.name for p in (REPO / "crllk").glob("*/__init__.py")} - {"conf"}
+    assert packages == set(_hook().REFERENCE)
+    for package in packages:
+        built = (site / "reference" / package / "index.html").read_text()
+        for module in (REPO / "crllk" / package).glob("[!_]*.py"):
+            assert f'id="crllk.{package}.{module.stem}"' in built, module
+    commands = {"train", "evaluate", "record", "experiments", "pictures", "screenshots", "demo",
+                "export", "deploy", "convert"}
+    pages = "".join(p.read_text() for p in (site / "reference").rglob("index.html"))
+    for module in (REPO / "crllk").glob("[!_]*.py"):
+        if module.stem not in commands:
+            assert f'id="crllk.{module.stem}"' in pages, module
+
+
 def test_the_results_pages_show_the_committed_tables(site):
     camera = (site / "results" / "camera" / "index.html").read_text()
     for table in ("Table 1: small_loop", "CRLLK vs PPO: zigzag", "CRLLK vs PPO: obstacle_loop",
