@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import importlib.util
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -174,3 +175,17 @@ def test_the_screenshots_show_the_site(browser_site, tmp_path):
         low, high = image.getextrema()
         assert high - low > 100
         assert (DOCS / "images" / name).read_bytes()[:4] == b"\x89PNG"
+
+
+def test_every_command_the_documentation_names_exists():
+    """Each ``python -m crllk.<module>`` of the README and of every page is a module that runs
+    (a command renamed or moved fails here, not in a reader's shell)."""
+    from docs_pages import pages
+
+    named = set()
+    for name in ["README.md", *pages()]:
+        named |= set(re.findall(r"python -m (crllk(?:\.\w+)+)", page(name)))
+    assert {"crllk.train", "crllk.evaluate", "crllk.export"} <= named
+    for module in named:
+        path = REPO / Path(*module.split("."))
+        assert path.with_suffix(".py").is_file() or (path / "__main__.py").is_file(), module
