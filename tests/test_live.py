@@ -62,13 +62,14 @@ def test_iterations_and_recordings_land_on_the_iteration_timeline(tmp_path):
 
 
 def test_the_plots_are_the_learner_s_own_diagnostics(tmp_path):
-    """SAC-Lagrangian's losses get plots, PPO's do not (they are not in its metrics.csv)."""
+    """SAC-Lagrangian's losses get plots, PPO's do not (they are not in its metrics.csv); a
+    learner's other diagnostics (counters, statistics) are not plotted."""
     sac = ["loss_actor", "loss_qvalue", "loss_alpha", "alpha"]
     names = live_series(CONSTRAINTS, sac)
     assert [c for c in names if c.startswith("loss_")] == ["loss_actor", "loss_qvalue",
                                                             "loss_alpha"]
-    assert (names["loss_qvalue"], names["alpha"], names["frames_per_s"]) == \
-        ("Q-value loss", "alpha", "frames/s")
+    assert (names["loss_qvalue"], names["frames_per_s"]) == ("Q-value loss", "frames/s")
+    assert "alpha" not in names  # a learner's other diagnostics stay in metrics.csv
     view = LiveView([rr.FileSink(tmp_path / "live.rrd")], "live-sac", CONSTRAINTS, THRESHOLDS,
                     diagnostics=sac)
     view.log_iteration({"iteration": 1, **dict.fromkeys(names, 0.5)})

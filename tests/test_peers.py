@@ -23,7 +23,7 @@ from crllk.evaluation.peer_runs import evaluate_peer, load_peer_actor, read_peer
 from crllk.experiments.peers import best_tracker, time_to_constraints, worst_ratio
 from crllk.gym import LaneKeepingEnv
 from crllk.paths import task_file
-from crllk.peers.env_server import COST_LIMIT, scalar_cost
+from crllk.peers.env_server import COST_LIMIT, episode_end_correction, scalar_cost
 from crllk.protocol import TEST_SEED, VALIDATION_SEED
 from crllk.tasks.constraints import BUILTIN
 
@@ -47,6 +47,18 @@ def test_scalar_cost_worked_numbers():
                 for _ in range(512))
     assert total == pytest.approx(0.5)
     assert COST_LIMIT == 1.0
+
+
+def test_an_episode_that_ends_early_costs_its_own_mean():
+    # 100 steps, 30 dm of lane deviation in all, horizon 512, alpha_1 = 0.5: the steps gave
+    # 30 / (0.5 * 512) = 0.1171875, the episode's value is (30 / 100) / 0.5 = 0.6, so its last
+    # step adds 30 * (1/100 - 1/512) / 0.5 = 0.4828125
+    correction = episode_end_correction({"lane": 30.0, "collision": 1.0}, 100, PAPER, ALPHAS,
+                                        512)
+    assert correction == pytest.approx(0.4828125)
+    assert 30.0 / (0.5 * 512) + correction == pytest.approx(0.6)
+    assert episode_end_correction({"lane": 30.0, "collision": 0.0}, 512, PAPER, ALPHAS,
+                                  512) == 0.0
 
 
 # ----- the task server -----------------------------------------------------------------------
@@ -93,7 +105,26 @@ def test_the_server_plays_the_task_as_the_gymnasium_adapter_does(tmp_path):
     assert float(lane) == pytest.approx(np.mean([s["costs"]["lane"] for s in steps]), rel=1e-5)
 
 
+def test_an_episode_s_costs_add_up_to_its_values_over_their_thresholds(tmp_path):
+    """Steering hard leaves the road long before the horizon: the costs the server sent over
+    the episode sum to J_clane / alpha_1 + J_coll / alpha_2 of that episode, exactly."""
+    task, log = _short_task(tmp_path, horizon=400), tmp_path / "episodes.csv"
+    done = _serve(task, log, [{"reset": 0}, *({"step": [1.0, 1.0]} for _ in range(400))])
+    replies = [json.loads(line) for line in done.stdout.splitlines()[2:]]
+    ended = next(k for k, r in enumerate(replies) if r["terminated"] or r["truncated"])
+    assert replies[ended]["terminated"] and ended < 399
+    header, values = (line.split(",") for line in log.read_text().splitlines()[:2])
+    row = dict(zip(header, values, strict=True))
+    assert int(row["episode_length"]) == ended + 1
+    assert sum(r["cost"] for r in replies[:ended + 1]) == pytest.approx(
+        float(row["J_clane"]) / 0.5 + float(row["J_coll"]) / 0.02, rel=1e-5)
+    # the server then wants a reset
+    assert done.returncode == 2 and "step: no episode under way: reset first" in done.stderr
+
+
 @pytest.mark.parametrize(("request_line", "problem"), [
+    ({"reset": -1}, "reset: seed must be >= 0"),
+    ({"step": [0.5, 0.0]}, "step: no episode under way: reset first"),
     ({"reset": TEST_SEED}, "reset: seed must not be the test seed"),
     ("not json", "request: not JSON"),
     ({"jump": 1}, "request: expected one of reset, step, close, got 'jump'"),
@@ -119,6 +150,15 @@ def test_the_peer_policy_plays_the_library_s_own_actions():
     _, peer = load_peer_actor(PEER_RUN, 24, 2)  # checks the probe inside
     assert (peer["library"], peer["algo"], peer["task"]) == ("omnisafe", "PPOLag", "small_loop")
     assert len(peer["probe"]["states"]) == 8
+
+
+def test_the_library_normalised_each_observation_once():
+    """Features 8 and 11 stay 1.5 on small_loop (nothing ahead): a normaliser fed each
+    observation once keeps mean 1.5 and its floor std 0.01; fed the already normalised copy
+    too (an info entry aliasing the observation), its statistics drift (mean 1.24, std 0.26)."""
+    arrays = np.load(PEER_RUN / "policy.npz")
+    np.testing.assert_allclose(arrays["obs_mean"][[8, 11]], 1.5, rtol=1e-6)
+    np.testing.assert_allclose(arrays["obs_std"][[8, 11]], 0.01, rtol=1e-6)
 
 
 def _copy_run(tmp_path: Path) -> Path:

@@ -33,10 +33,6 @@ PROBE_TOLERANCE = 1e-4
 """Largest difference allowed between the library's probe actions and crllk's."""
 
 
-def is_peer_run(run_dir: str | Path) -> bool:
-    return (Path(run_dir) / PEER_FILE).is_file()
-
-
 def read_peer(run_dir: str | Path) -> dict[str, Any]:
     """``peer.json`` of a peer run.
 
@@ -48,8 +44,10 @@ def read_peer(run_dir: str | Path) -> dict[str, Any]:
         document = json.loads(path.read_text())
     except (OSError, json.JSONDecodeError) as err:
         raise ConfigError(path, "peer", f"cannot be read ({err})") from None
+    if not isinstance(document, dict):
+        raise ConfigError(path, "peer", "expected a JSON object")
     missing = [k for k in ("library", "algo", "task", "seed", "frames") if k not in document]
-    if not isinstance(document, dict) or missing:
+    if missing:
         raise ConfigError(path, "peer", f"missing {', '.join(missing)}")
     return document
 
@@ -65,10 +63,15 @@ def load_peer_actor(run_dir: str | Path, observation_size: int, action_size: int
                              action_size=action_size, activation=peer.get("activation", "tanh"))
     probe = peer.get("probe")
     if probe:
-        states = torch.as_tensor(probe["states"], dtype=torch.float32)
-        with torch.no_grad(), set_exploration_type(ExplorationType.DETERMINISTIC):
-            actions = actor(TensorDict({"state": states}, batch_size=[len(states)]))["action"]
-        gap = float((actions - torch.as_tensor(probe["actions"])).abs().max())
+        try:
+            states = torch.as_tensor(probe["states"], dtype=torch.float32)
+            expected = torch.as_tensor(probe["actions"], dtype=torch.float32)
+            with torch.no_grad(), set_exploration_type(ExplorationType.DETERMINISTIC):
+                actions = actor(TensorDict({"state": states}, batch_size=[len(states)]))
+            gap = float((actions["action"] - expected).abs().max())
+        except (KeyError, TypeError, ValueError, RuntimeError) as err:
+            raise ConfigError(Path(run_dir) / PEER_FILE, "probe", f"unusable: "
+                              f"{' '.join(str(err).split())[:120]}") from None
         if gap > PROBE_TOLERANCE:
             raise ConfigError(Path(run_dir) / PEER_POLICY, "policy", f"plays actions {gap:.2g} "
                               f"from the library's own on its probe")
@@ -88,7 +91,7 @@ def evaluate_peer(run_dir: str | Path, *, episodes: int, seed: int,
                        action="continuous", seed=seed)
         try:
             size = int(env.observation_spec["state"].shape[-1])
-            actor, _ = load_peer_actor(run_dir, size, 2)
+            actor, _ = load_peer_actor(run_dir, size, int(env.action_spec.shape[-1]))
             result = run_episodes(env, actor, episodes, deterministic=deterministic,
                                   sample_seed=seed)
         finally:
@@ -107,5 +110,5 @@ def evaluate_peer(run_dir: str | Path, *, episodes: int, seed: int,
     return document
 
 
-__all__ = ["PEER_EPISODES", "PEER_FILE", "PEER_POLICY", "evaluate_peer", "is_peer_run",
-           "load_peer_actor", "read_peer"]
+__all__ = ["PEER_EPISODES", "PEER_FILE", "PEER_POLICY", "evaluate_peer", "load_peer_actor",
+           "read_peer"]

@@ -3,8 +3,8 @@ library's on the same tasks, judged by the same test evaluation.
 
 - crllk: CRLLK-D (PPO-Lagrangian, dual ascent), its PID variant (``algo.multiplier=pid``),
   CRLLK-C (continuous actions, the peers' action space) and SAC-Lagrangian
-  (``algo=sac_lagrangian``), with the trainer's defaults (encounter spawns and the teacher on
-  maps with obstacles: named in the table);
+  (``algo=sac_lagrangian``), with the trainer's defaults (the PPO learners' teacher, encounter
+  spawns on maps with obstacles: each run's aids named in the table, read from the run);
 - OmniSafe: PPOLag and CPPOPID with OmniSafe's default settings, trained in their own Python
   (``make peers``; ``peers/omnisafe/train.py``) on the task served by
   :mod:`crllk.peers.env_server`, which gives them one cost, the constraints' normalised sum
@@ -30,6 +30,7 @@ from joblib import Parallel, delayed
 from crllk.errors import ConfigError
 from crllk.evaluation.peer_runs import PEER_EPISODES, evaluate_peer, read_peer
 from crllk.evaluation.report import aggregate, format_summary
+from crllk.evaluation.runs import EVALUATION_ENVS
 from crllk.experiments.runs import (
     SOURCE,
     THRESHOLDS,
@@ -49,6 +50,9 @@ PEER_ALGOS = ("PPOLag", "CPPOPID")
 """OmniSafe's algorithms in the table."""
 PEER_PYTHON = SOURCE_ROOT / ".venv-omnisafe" / "bin" / "python"
 PEER_TRAINER = SOURCE_ROOT / "peers" / "omnisafe" / "train.py"
+PEER_EPOCH_FRAMES = 20_000
+"""Frames per OmniSafe epoch (its default for PPOLag and CPPOPID): a peer run's budget is a
+whole number of them."""
 WINDOW_EPISODES = 100
 """Training episodes the time to both constraints averages over."""
 PID_GAINS = ("algo.constraints.lane.kp=0.5", "algo.constraints.collision.kp=5.0")
@@ -57,7 +61,7 @@ step size); no derivative term. Not tuned."""
 
 
 @dataclass(frozen=True)
-class Learner:
+class Contender:
     """A row of the table: a crllk run configuration, or a peer library's algorithm."""
 
     name: str
@@ -76,19 +80,20 @@ class Learner:
         return self.spec(task, seed).directory(root)
 
 
-LEARNERS = (
-    Learner("CRLLK-D"),
-    Learner("CRLLK-D PID", tag="-pid", extra=("algo.multiplier=pid", *PID_GAINS)),
-    Learner("CRLLK-C", agent="CRLLK-C"),
-    Learner("SAC-Lagrangian-D", tag="-sac", extra=("algo=sac_lagrangian",)),
-    *(Learner(f"OmniSafe {algo}", peer=algo) for algo in PEER_ALGOS),
+CONTENDERS = (
+    Contender("CRLLK-D"),
+    Contender("CRLLK-D PID", tag="-pid", extra=("algo.multiplier=pid", *PID_GAINS)),
+    Contender("CRLLK-C", agent="CRLLK-C"),
+    Contender("SAC-Lagrangian-D", tag="-sac", extra=("algo=sac_lagrangian",)),
+    *(Contender(f"OmniSafe {algo}", peer=algo) for algo in PEER_ALGOS),
 )
 
 
 # ----- peers ---------------------------------------------------------------------------------
 def peer_command(algo: str, task: str, seed: int, frames: int, run_dir: Path) -> list[str]:
     return [str(PEER_PYTHON), str(PEER_TRAINER), "--algo", algo, "--task", task,
-            "--seed", str(seed), "--frames", str(frames), "--run-dir", str(run_dir)]
+            "--seed", str(seed), "--frames", str(frames), "--run-dir", str(run_dir),
+            "--steps-per-epoch", str(PEER_EPOCH_FRAMES)]
 
 
 def peer_frames(run_dir: Path) -> int:
@@ -102,7 +107,10 @@ def peer_frames(run_dir: Path) -> int:
 def train_peers(runs: Sequence[tuple[str, str, int, Path]], settings: Settings) -> None:
     """Trains the unfinished ``(algo, task, seed, run_dir)`` peer runs, ``jobs`` at a time, each
     one's output in ``<run_dir>.log``."""
-    todo = [r for r in runs if peer_frames(r[3]) < settings.frames // 20_000 * 20_000]
+    if settings.frames % PEER_EPOCH_FRAMES:
+        raise ConfigError(SOURCE, "--frames", f"peers: a whole number of OmniSafe epochs of "
+                          f"{PEER_EPOCH_FRAMES:,} frames, got {settings.frames:,}")
+    todo = [r for r in runs if peer_frames(r[3]) < settings.frames]
     if todo and not PEER_PYTHON.is_file():
         raise ConfigError(SOURCE, "peers", f"{PEER_PYTHON} is missing: run `make peers` first")
     print(f"training {len(todo)} of {len(runs)} peer runs ({settings.jobs} at a time)",
@@ -148,6 +156,7 @@ def _peer_evaluation_is_current(run_dir: Path, settings: Settings, name: str,
     return (document["source"].get("frames") == peer_frames(run_dir)
             and evaluation.get("episodes") == settings.episodes
             and evaluation.get("seed") == settings.eval_seed
+            and evaluation.get("num_envs") == EVALUATION_ENVS
             and evaluation.get("deterministic") is deterministic)
 
 
@@ -190,23 +199,20 @@ def training_speed(rows: Sequence[Mapping[str, str]]) -> float:
     return float(last["frames"]) / float(last["time_s"])
 
 
-def aids_of(run_dir: Path) -> str:
-    """The training aids a run used: encounter spawns, the teacher (crllk's), none (peers)."""
+def aids_of(run_dir: Path, rows: Sequence[Mapping[str, str]]) -> str:
+    """The training aids a run used, read from the run itself: encounter spawns (on a map with
+    obstacles, where they apply) and the teacher (an imitation term that was not zero in
+    ``metrics.csv``, on any map); "none" for a peer's run."""
     config = run_dir / "config.yaml"
     if not config.is_file():
         return "none"
     stored = read_run_config(config)
     aids = []
-    if float(stored.get("encounters", 0) or 0) > 0 and _has_obstacles(stored):
+    if float(stored.get("encounters", 0) or 0) > 0 and stored.task.map.get("objects"):
         aids.append(f"encounter spawns {float(stored.encounters):g}")
-    teacher = stored.get("teacher")
-    if teacher is not None and float(teacher.get("coeff", 0)) > 0 and _has_obstacles(stored):
+    if any(float(row.get("loss_imitation") or 0.0) != 0.0 for row in rows):
         aids.append("teacher")
     return ", ".join(aids) or "none"
-
-
-def _has_obstacles(stored: Any) -> bool:
-    return bool(stored.task.map.get("objects"))
 
 
 # ----- the experiment ------------------------------------------------------------------------
@@ -216,12 +222,12 @@ def peers(settings: Settings) -> list[Path]:
         raise ConfigError(SOURCE, "--obs", "peers: the peer library's agents read state "
                           "features only: give --obs state")
     root = settings.runs_root
-    crllk_learners = [learner for learner in LEARNERS if not learner.peer]
-    specs = [learner.spec(task, seed) for task in TASKS for learner in crllk_learners
+    crllk_contenders = [contender for contender in CONTENDERS if not contender.peer]
+    specs = [contender.spec(task, seed) for task in TASKS for contender in crllk_contenders
              for seed in settings.seeds]
     outcome = train_and_evaluate(specs, settings)
-    peer_runs = [(learner.peer, task, seed, learner.directory(root, task, seed))
-                 for task in TASKS for learner in LEARNERS if learner.peer
+    peer_runs = [(contender.peer, task, seed, contender.directory(root, task, seed))
+                 for task in TASKS for contender in CONTENDERS if contender.peer
                  for seed in settings.seeds]
     train_peers(peer_runs, settings)
     outcome.evaluated += evaluate_peers([r[3] for r in peer_runs], settings)
@@ -236,18 +242,20 @@ def peers_document(settings: Settings, outcome: Any) -> dict[str, Any]:
     maps: dict[str, Any] = {}
     for task in TASKS:
         entries = {}
-        for learner in LEARNERS:
-            dirs = [learner.directory(root, task, seed) for seed in settings.seeds]
+        for contender in CONTENDERS:
+            dirs = [contender.directory(root, task, seed) for seed in settings.seeds]
             documents = [json.loads((d / f"{TEST_EVALUATION}.json").read_text()) for d in dirs]
             modes = [json.loads((d / f"{TEST_MODE_EVALUATION}.json").read_text()) for d in dirs]
             entry = aggregate(documents)
             entry["mode"] = aggregate(modes)
-            rows = [training_rows(d) for d in dirs]
-            reached = [time_to_constraints(r, THRESHOLDS) for r in rows]
-            entry["training"] = [
-                {"frames_per_s": training_speed(r), "time_to_constraints": t,
-                 "aids": aids_of(d)} for r, t, d in zip(rows, reached, dirs, strict=True)]
-            entries[learner.name] = entry
+            entry["training"] = {}
+            for seed, run_dir in zip(settings.seeds, dirs, strict=True):
+                rows = training_rows(run_dir)
+                entry["training"][str(seed)] = {
+                    "frames_per_s": training_speed(rows),
+                    "time_to_constraints": time_to_constraints(rows, THRESHOLDS),
+                    "aids": aids_of(run_dir, rows)}
+            entries[contender.name] = entry
         maps[task] = {"learners": entries, "best": best_tracker(entries)}
     return {"title": "crllk's constrained learners and OmniSafe's, from state",
             "thresholds": THRESHOLDS, "settings": settings_dict(settings),
@@ -275,8 +283,9 @@ def peers_markdown(document: Mapping[str, Any]) -> str:
              "(dm) / J_coll / J_R (m) of one training run on the test seed, with the 95 % "
              "intervals of the constraints' metrics; marks: both constraints hold on the point "
              "estimate, then at the 95 % upper bound. Speed: training frames per second of "
-             "wall time (runs of one table may have run on different days and beside other "
-             "work: compare within a row). To constraints: the first training frame from "
+             "wall time (runs may have run on different days and beside other work, and a "
+             "peer steps one simulation behind a JSON pipe: a rough guide only). To "
+             "constraints: the first training frame from "
              f"which the last {document['window_episodes']} training episodes meet both "
              "thresholds.", "",
              f"- Observation: `{settings['obs']}`; budget {settings['frames']:,} frames per run; "
@@ -297,8 +306,8 @@ def peers_markdown(document: Mapping[str, Any]) -> str:
         for name, entry in table["learners"].items():
             sampled = seed_cells(entry, thresholds)
             mode = seed_cells(entry["mode"], thresholds)
-            for (seed, cell), training in zip(sorted(sampled.items()), entry["training"],
-                                              strict=True):
+            for seed, cell in sorted(sampled.items()):
+                training = entry["training"][str(seed)]
                 reached = training["time_to_constraints"]
                 when = (f"{reached[0] / 1000:.0f}k frames, {reached[1] / 60:.1f} min"
                         if reached else "never")
@@ -308,4 +317,4 @@ def peers_markdown(document: Mapping[str, Any]) -> str:
     return "\n".join(lines)
 
 
-__all__ = ["LEARNERS", "peers", "peers_markdown", "time_to_constraints", "worst_ratio"]
+__all__ = ["CONTENDERS", "peers", "peers_markdown", "time_to_constraints", "worst_ratio"]

@@ -5,7 +5,7 @@ runs in another Python (a peer library whose pins cannot share crllk's environme
 The protocol is JSON, one object per line each way, numbers and names only: neither side ever
 unpickles what the other sends. On start the server writes the task's description::
 
-    {"observation_size": 13, "action_size": 2, "horizon": 512, "cost_limit": 1.0,
+    {"observation_size": 24, "action_size": 2, "horizon": 512, "cost_limit": 1.0,
      "thresholds": {"lane": 0.5, "collision": 0.02}}
 
 then answers each request with one line::
@@ -16,11 +16,14 @@ then answers each request with one line::
                                  "terminated": false, "truncated": false}
     {"close": true}          -> the server exits (so does the end of its input)
 
-A request it cannot serve gets ``{"error": "..."}`` (one line) and the server exits with status
-2. The reply's ``cost`` is the peer's single cost (:func:`scalar_cost`); ``costs`` the task's
-own, by constraint. Every finished episode is appended to ``log`` in ``metrics.csv``'s columns
-(one row per episode: ``frames`` served so far, wall ``time_s``, ``J_R`` and each constraint's
-episode value), so a peer's training curve is read like the trainer's.
+A request it cannot serve (a seed out of range or the test seed, a step before the first reset
+or after an episode's end, an action that is not two finite numbers) gets ``{"error": "..."}``
+(one line) and the server exits with status 2. The reply's ``cost`` is the peer's single cost
+(:func:`scalar_cost`, with :func:`episode_end_correction` on an episode's last step); ``costs``
+the task's own, by constraint. Every finished episode is appended to ``log`` in
+``metrics.csv``'s columns (one row per episode: ``frames`` served so far, wall ``time_s``,
+``J_R`` and each constraint's episode value), so a peer's training curve is read like the
+trainer's.
 """
 
 from __future__ import annotations
@@ -38,8 +41,7 @@ from crllk.cli import run
 from crllk.config import algo_thresholds
 from crllk.errors import ConfigError
 from crllk.gym import LaneKeepingEnv
-from crllk.protocol import reserved_seed_problem
-from crllk.settings import MISSING, parse_dotlist, setting
+from crllk.settings import MISSING, parse_dotlist, setting, spawn_seed
 from crllk.tasks.constraints import Constraint
 from crllk.training.logs import CsvLog
 
@@ -57,8 +59,8 @@ def scalar_cost(costs: Mapping[str, float], constraints: Sequence[Constraint],
         c_t = Σ_k c_k,t / (α_k · H)   (mean over the episode, e.g. lane deviation)
             + Σ_k c_k,t / α_k         (sum over the episode, e.g. collisions)
 
-    An episode's total is then Σ_k (episode value_k / α_k) for a full-length episode (a
-    shorter one ends on a collision, costing 1/α2 = 50 alone), and its expectation at most
+    With :func:`episode_end_correction` added on its last step, an episode's total is
+    Σ_k (episode value_k / α_k) whatever its length, so an expectation at most
     :data:`COST_LIMIT` = 1 implies E[value_k] <= α_k for every k: a sufficient, tighter
     condition than the task's constraints (the budget is shared between them)."""
     total = 0.0
@@ -66,6 +68,16 @@ def scalar_cost(costs: Mapping[str, float], constraints: Sequence[Constraint],
         scale = thresholds[constraint.name] * (horizon if constraint.aggregate == "mean" else 1)
         total += costs[constraint.name] / scale
     return total
+
+
+def episode_end_correction(totals: Mapping[str, float], length: int,
+                           constraints: Sequence[Constraint], thresholds: Mapping[str, float],
+                           horizon: int) -> float:
+    """What an episode of ``length`` steps that ended before the horizon adds on its last step
+    so that its mean-aggregated costs count over its own length: Σ_k total_k · (1/L − 1/H) / α_k
+    (0 for a full-length episode)."""
+    return sum(totals[c.name] * (1.0 / length - 1.0 / horizon) / thresholds[c.name]
+               for c in constraints if c.aggregate == "mean")
 
 
 @dataclass
@@ -82,8 +94,9 @@ class ServerConfig:
     """α2 (collisions per episode)."""
 
     def problems(self) -> Iterator[tuple[str, str]]:
-        if self.lane_threshold <= 0 or self.collision_threshold <= 0:
-            yield "lane_threshold", "thresholds must be above 0"
+        for name in ("lane_threshold", "collision_threshold"):
+            if getattr(self, name) <= 0:
+                yield name, "must be above 0"
 
 
 class EpisodeLog:
@@ -129,6 +142,7 @@ class Server:
         self.thresholds = {c.name: wanted.get(c.name, defaults[c.name])
                            for c in self.constraints}
         self.log = EpisodeLog(Path(config.log), self.constraints)
+        self.in_episode = False
 
     def description(self) -> dict[str, Any]:
         return {"observation_size": int(self.env.observation_space.shape[0]),
@@ -149,21 +163,29 @@ class Server:
         if kind == "reset":
             if value is not None and (not isinstance(value, int) or isinstance(value, bool)):
                 raise _bad("reset", f"expected a whole-number seed or null, got {value!r}")
-            problem = reserved_seed_problem(value)
+            problem = None if value is None else spawn_seed(value)
             if problem:
                 raise _bad("reset", f"seed {problem}")
             observation, _ = self.env.reset(seed=value)
             self.log.start_episode()
+            self.in_episode = True
             return {"observation": observation.tolist()}
         if kind == "step":
+            if not self.in_episode:
+                raise _bad("step", "no episode under way: reset first")
             try:
                 observation, reward, terminated, truncated, info = self.env.step(value)
             except ValueError as err:  # an action the task refuses
                 raise _bad("step", str(err)) from None
             costs = {c.name: info[c.cost_key] for c in self.constraints}
-            self.log.add(reward, costs, terminated or truncated)
-            return {"observation": observation.tolist(), "reward": reward,
-                    "cost": scalar_cost(costs, self.constraints, self.thresholds, self.horizon),
+            cost = scalar_cost(costs, self.constraints, self.thresholds, self.horizon)
+            self.in_episode = not (terminated or truncated)
+            if not self.in_episode:
+                totals = {name: self.log.totals[name] + costs[name] for name in costs}
+                cost += episode_end_correction(totals, self.log.length + 1, self.constraints,
+                                               self.thresholds, self.horizon)
+            self.log.add(reward, costs, not self.in_episode)
+            return {"observation": observation.tolist(), "reward": reward, "cost": cost,
                     "costs": costs, "terminated": terminated, "truncated": truncated}
         raise _bad("request", f"expected one of reset, step, close, got {kind!r}"[:200])
 

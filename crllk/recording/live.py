@@ -52,12 +52,13 @@ THRESHOLD = "threshold"
 def series(constraints: Sequence[Constraint],
            diagnostics: Sequence[str] = PPO_DIAGNOSTICS) -> dict[str, str]:
     """Columns of ``metrics.csv`` logged at ``train/<column>``, with their plot names: J_R,
-    each constraint's metric and multiplier, the learner's ``diagnostics`` (its losses,
-    :attr:`crllk.algos.base.Learner.diagnostic_names`), frames/s."""
+    each constraint's metric and multiplier, the losses among the learner's ``diagnostics``
+    (:attr:`crllk.algos.base.Learner.diagnostic_names`, ``loss_*``), frames/s."""
     return {"J_R": "J_R (m)",
             **{c.metric: f"{c.metric} ({c.unit})" for c in constraints},
             **{f"lambda_{c.name}": f"λ_{c.name}" for c in constraints},
-            **{name: SERIES_NAMES.get(name, name) for name in (*diagnostics, "frames_per_s")}}
+            **{name: SERIES_NAMES.get(name, name)
+               for name in (*(d for d in diagnostics if d.startswith("loss_")), "frames_per_s")}}
 _SERVER_MEMORY = "512MiB"
 """The server keeps at most this much of the run for viewers that connect later."""
 _THRESHOLD_RGB = (160, 160, 160)

@@ -12,7 +12,7 @@ limit 1). Every training episode lands in ``<run_dir>/episodes.csv`` (written by
 At the end the policy goes to ``<run_dir>/policy.npz`` (arrays only: the observation
 normaliser, the actor's layers and log standard deviation) and ``<run_dir>/peer.json`` (the
 algorithm, its settings, frames and wall time), which crllk's evaluation reads
-(``crllk.peers.policy``). OmniSafe's own logs go to ``<run_dir>/omnisafe/``.
+(``crllk.rl.peer_policy``). OmniSafe's own logs go to ``<run_dir>/omnisafe/``.
 """
 
 from __future__ import annotations
@@ -100,10 +100,12 @@ def task_environment(python: str, task: str, log: Path, description: dict[str, A
             assert self._server is not None, "step before reset"
             reply = self._server.ask({"step": action.detach().cpu().reshape(-1).tolist()})
             observation = self._tensor(reply["observation"])
+            # no "final_observation" here: OmniSafe's AutoReset adds it (a separate tensor) when
+            # an episode ends, and its ObsNormalize normalises that entry in place: the same
+            # tensor as the observation would be normalised twice
             return (observation, self._tensor(reply["reward"]), self._tensor(reply["cost"]),
                     self._tensor(reply["terminated"], torch.bool),
-                    self._tensor(reply["truncated"], torch.bool),
-                    {"final_observation": observation})
+                    self._tensor(reply["truncated"], torch.bool), {})
 
         def reset(self, seed: int | None = None, options: dict[str, Any] | None = None):
             if self._server is None:
@@ -185,7 +187,8 @@ def main() -> int:
 
     run_dir: Path = args.run_dir.resolve()
     run_dir.mkdir(parents=True, exist_ok=True)
-    for stale in ("episodes.csv", "policy.npz", "peer.json"):  # a run cut short starts afresh
+    for stale in ("episodes.csv", "policy.npz", "peer.json", "test.json", "test-mode.json"):
+        # a run cut short, or trained again, starts afresh, its old evaluations gone too
         (run_dir / stale).unlink(missing_ok=True)
     probe = TaskServer(args.crllk_python, args.task, run_dir / ".probe.csv")
     description = probe.description
