@@ -11,12 +11,15 @@ import pytest
 import torch
 
 import crllk
+from crllk.analysis.recording_picture import series
 from crllk.envs.batched import make_env
 from crllk.errors import ConfigError
 from crllk.maps.obstacles import footprint_gap
 from crllk.maps.routes import advance, opposite_lane
+from crllk.recording.recorder import read_recording, record_episodes
 from crllk.sim import constants as C
 from crllk.tasks.config import load_task_config
+from crllk.tasks.follower import FollowerPolicy
 from crllk.tasks.traffic import FOLLOW_GAP, ROADSIDE, duckiebot_box, pedestrian_box
 
 STILL = np.zeros(2)
@@ -340,3 +343,21 @@ def test_bad_traffic_settings_name_the_field(overrides, field):
 def test_traffic_needs_a_road_without_obstacles():
     with pytest.raises(ConfigError, match=r"obstacle_loop.yaml: traffic: movers do not avoid"):
         load_task_config("obstacle_loop", {"traffic": {"vehicles": {"ahead": 1}}})
+
+
+# ----- recordings ---------------------------------------------------------------------------
+
+def test_recordings_show_the_movers_at_every_step(tmp_path):
+    """A recorded traffic_loop episode logs both vehicles' boxes at every step, moving as
+    vehicles do (at most 0.2 m/s)."""
+    env = make_env("traffic_loop", observation="state", action="duty", seed=1,
+                   overrides={"horizon": 20})
+    report = record_episodes(env, FollowerPolicy(env), 1, tmp_path / "t.rrd")
+    env.close()
+    rows = series(read_recording(tmp_path / "t.rrd")["world/movers"], "Boxes3D:centers").values
+    assert len(rows) == report.steps == 20
+    centres = np.array([[c[:2] for c in row] for row in rows])
+    assert centres.shape == (20, 2, 2)
+    moved = np.linalg.norm(np.diff(centres, axis=0), axis=2)
+    assert moved.max() <= 0.2 / 30 + 1e-4
+    assert moved.sum() > 0.05

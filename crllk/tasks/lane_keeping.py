@@ -369,6 +369,13 @@ class LaneKeeping(control.Task):
     def hit_mover(self) -> int | None:
         return self.episode.hit_mover
 
+    @property
+    def mover_boxes(self) -> list[MapObject]:
+        """The moving agents' footprint boxes now (none without traffic)."""
+        if self.traffic is None:
+            return []
+        return self.traffic.boxes(self.episode.traffic)
+
     # ----- snapshots --------------------------------------------------------------------
     def episode_state(self) -> dict[str, Any]:
         """The whole :class:`EpisodeState` and the spawn generator's state, as plain Python

@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from crllk.maps import DuckietownMap, Lane, MapObject
+from crllk.maps.objects import OBJECT_SIZES
 from crllk.maps.obstacles import footprint_gap, footprint_points
 from crllk.maps.routes import (
     LANE_HALF_WIDTH,
@@ -56,6 +57,8 @@ ROADSIDE = 0.36
 """Distance (m) from the road centre line at which pedestrians wait: beyond the road tile."""
 START_SPACING = C.FOOTPRINT_LENGTH + FOLLOW_GAP + 0.05
 """Least distance (m) between the start positions of two vehicles in one lane."""
+VEHICLE_HEIGHT = OBJECT_SIZES["duckiebot"][2]
+"""Height (m) of a Duckiebot's box in recordings."""
 _MAX_LATERAL_ACCELERATION = FollowerGains.max_lateral_acceleration
 _PLACEMENT_ATTEMPTS = 100
 
@@ -174,12 +177,17 @@ class Traffic:
                        for k, (side, walked, *_rest) in enumerate(state["pedestrians"])]
         return vehicles + pedestrians
 
+    def boxes(self, state: dict[str, Any]) -> list[MapObject]:
+        """Every mover's footprint box (with its height), in :meth:`poses`' order."""
+        poses = self.poses(state)
+        return ([duckiebot_box(*pose) for pose in poses[:self.vehicles]]
+                + [pedestrian_box(*pose) for pose in poses[self.vehicles:]])
+
     def _vehicle_boxes(self, state: dict[str, Any]) -> list[MapObject]:
-        return [duckiebot_box(*self.map.lanes[lane].point_at(along))
-                for lane, along, _ in state["vehicles"]]
+        return self.boxes(state)[:self.vehicles]
 
     def _pedestrian_boxes(self, state: dict[str, Any]) -> list[MapObject]:
-        return [pedestrian_box(*pose) for pose in self.poses(state)[self.vehicles:]]
+        return self.boxes(state)[self.vehicles:]
 
     def headway(self, state: dict[str, Any], lane: Lane, along: float) -> float | None:
         """Gap (m) from the front of a robot at ``along`` on ``lane`` to the nearest vehicle
@@ -194,7 +202,7 @@ def duckiebot_box(x: float, y: float, yaw: float) -> MapObject:
     """The collision footprint of a Duckiebot whose axle is at (x, y, yaw)."""
     back = C.FOOTPRINT_CENTRE_BEHIND_AXLE
     return MapObject("duckiebot", x - back * math.cos(yaw), y - back * math.sin(yaw), yaw,
-                     C.FOOTPRINT_LENGTH, C.FOOTPRINT_WIDTH, 0.0)
+                     C.FOOTPRINT_LENGTH, C.FOOTPRINT_WIDTH, VEHICLE_HEIGHT)
 
 
 def pedestrian_box(x: float, y: float, yaw: float) -> MapObject:
