@@ -124,9 +124,9 @@ class Traffic:
         """Move every mover one control step, with the robot at ``robot`` (axle pose)."""
         robot_box = duckiebot_box(*robot)
         robot_points = footprint_points(robot_box, 3)
-        pedestrian_points = [p for box in self._pedestrian_boxes(state)
-                             for p in footprint_points(box, 3)]
-        vehicle_boxes = self._vehicle_boxes(state)
+        boxes = self.boxes(state)
+        vehicle_boxes = boxes[:self.vehicles]
+        pedestrian_points = [p for box in boxes[self.vehicles:] for p in footprint_points(box, 3)]
         for k, vehicle in enumerate(state["vehicles"]):
             others = [p for j, box in enumerate(vehicle_boxes) if j != k
                       for p in footprint_points(box, 3)]
@@ -183,16 +183,10 @@ class Traffic:
         return ([duckiebot_box(*pose) for pose in poses[:self.vehicles]]
                 + [pedestrian_box(*pose) for pose in poses[self.vehicles:]])
 
-    def _vehicle_boxes(self, state: dict[str, Any]) -> list[MapObject]:
-        return self.boxes(state)[:self.vehicles]
-
-    def _pedestrian_boxes(self, state: dict[str, Any]) -> list[MapObject]:
-        return self.boxes(state)[self.vehicles:]
-
     def headway(self, state: dict[str, Any], lane: Lane, along: float) -> float | None:
         """Gap (m) from the front of a robot at ``along`` on ``lane`` to the nearest vehicle
         whose footprint reaches into that lane ahead (within :data:`LOOKAHEAD`), or None."""
-        points = [p for box in self._vehicle_boxes(state) for p in footprint_points(box, 3)]
+        points = [p for box in self.boxes(state)[:self.vehicles] for p in footprint_points(box, 3)]
         ahead = distance_ahead(self.map, lane, along, points, LANE_HALF_WIDTH,
                                LOOKAHEAD + FRONT)
         return None if ahead is None else ahead - FRONT
