@@ -5,6 +5,7 @@ culling of moving bodies and the checks of the ``traffic`` setting. Real MuJoCo 
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -22,6 +23,7 @@ from crllk.tasks.config import load_task_config
 from crllk.tasks.follower import FollowerPolicy
 from crllk.tasks.traffic import FOLLOW_GAP, ROADSIDE, duckiebot_box, pedestrian_box
 
+REAL_MAPS = Path(__file__).parent / "data" / "real_maps" / "gym-duckietown"
 STILL = np.zeros(2)
 """Both wheel duties 0: standing still."""
 FORWARD = np.array([0.5, 0.5])
@@ -80,6 +82,21 @@ def test_vehicles_ride_the_lane_centres(load):
                 assert pose.on_road
                 tiles.add(pose.tile)
         assert any(dmap.tile(*tile).kind.startswith("curve") for tile in tiles)
+
+
+@pytest.mark.parametrize("name", ["4way", "udem1"])
+def test_vehicles_ride_through_intersections(load, name):
+    """On real maps with intersections, two vehicles each way stay on lane centres for 300
+    steps while the robot stands still, and the task declares no collision."""
+    path = REAL_MAPS / f"{name}.yaml"
+    env = load(path, seed=1, overrides={"traffic": {"vehicles": {"ahead": 2, "opposite": 2}},
+                                         "horizon": 400})
+    env.reset()
+    dmap = env.task.map
+    for _ in range(300):
+        assert not env.step(STILL).last()
+        for x, y, yaw in mover_poses(env):
+            assert abs(dmap.lane_pose(x, y, yaw).lateral) < 1e-4
 
 
 def test_vehicles_start_ahead_and_in_the_opposite_lane(load):
