@@ -269,9 +269,10 @@ def test_an_episode_draws_one_number_for_its_traffic(load):
 @pytest.mark.parametrize(("task", "observation"), [("traffic_loop", "state"),
                                                    ("pedestrian_loop", "state"),
                                                    ("traffic_loop", "pixels")])
-def test_restored_env_replays_the_traffic(task, observation):
-    """A batched env restored from a snapshot taken mid-run replays the original's next steps
-    bit for bit, resets included, movers and all."""
+def test_restored_env_replays_the_traffic(tmp_path, task, observation):
+    """A batched env restored from a snapshot taken mid-run (through ``torch.save`` and
+    ``torch.load`` with ``weights_only``) replays the original's next steps bit for bit, resets
+    included, movers and all."""
     generator = torch.Generator().manual_seed(3)
     actions = torch.randint(0, 3, (70, 2), generator=generator)
     envs = [make_env(task, num_envs=2, observation=observation, seed=s,
@@ -282,7 +283,7 @@ def test_restored_env_replays_the_traffic(task, observation):
         for action in actions[:30]:
             td["action"] = action
             _, td = original.step_and_maybe_reset(td)
-        snapshot = original.sim_state()
+        torch.save(original.sim_state(), tmp_path / "env.pt")
         carried = td.clone()
         expected, poses = [], []
         for action in actions[30:]:
@@ -291,7 +292,7 @@ def test_restored_env_replays_the_traffic(task, observation):
             expected.append(step)
             poses.append(original.physics[0].data.mocap_pos.copy())
         restored.reset()
-        restored.load_sim_state(snapshot)
+        restored.load_sim_state(torch.load(tmp_path / "env.pt", weights_only=True))
         td = carried
         for k, action in enumerate(actions[30:]):
             td["action"] = action
