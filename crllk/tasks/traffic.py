@@ -185,10 +185,11 @@ class Traffic:
 
     def headway(self, state: dict[str, Any], lane: Lane, along: float) -> float | None:
         """Gap (m) from the front of a robot at ``along`` on ``lane`` to the nearest vehicle
-        whose footprint reaches into that lane ahead (within :data:`LOOKAHEAD`), or None."""
+        whose footprint reaches into that lane ahead (within :data:`LOOKAHEAD` or the headway
+        bound, whichever is longer), or None."""
         points = [p for box in self.boxes(state)[:self.vehicles] for p in footprint_points(box, 3)]
         ahead = distance_ahead(self.map, lane, along, points, LANE_HALF_WIDTH,
-                               LOOKAHEAD + FRONT)
+                               max(LOOKAHEAD, self.config.headway) + FRONT)
         return None if ahead is None else ahead - FRONT
 
 
