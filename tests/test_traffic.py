@@ -16,9 +16,11 @@ import crllk
 from crllk.analysis.recording_picture import series
 from crllk.envs.batched import make_env
 from crllk.errors import ConfigError
+from crllk.evaluation.report import breakdown, episode_rows
 from crllk.maps.obstacles import footprint_gap
 from crllk.maps.routes import advance, opposite_lane
 from crllk.recording.recorder import read_recording, record_episodes
+from crllk.rl.rollout import run_episodes
 from crllk.sim import constants as C
 from crllk.tasks.config import load_task_config
 from crllk.tasks.follower import FollowerPolicy
@@ -393,3 +395,15 @@ def test_a_stopped_traffic_run_resumes_exactly(tmp_path):
     straight = run_in_process(tmp_path / "straight", 4, small)
     assert_same_runs(straight, stopped, 4)
     assert "J_chead" in read_rows(straight / "metrics.csv")[0]
+
+
+def test_evaluation_names_the_mover_each_collision_hit():
+    """The follower (blind to movers) runs into the vehicle ahead: the evaluation's episodes
+    and breakdown name that mover."""
+    env = make_env("traffic_loop", observation="state", action="duty", seed=3)
+    result = run_episodes(env, FollowerPolicy(env), 1)
+    env.close()
+    assert result.terminations == ["collision"]
+    assert result.hit_movers == [0] and result.hit_objects == [None]
+    assert episode_rows(result, "duty")[0]["hit_mover"] == 0
+    assert breakdown(result)["collisions_by_mover"] == {"0": 1}
