@@ -346,6 +346,8 @@ def _vehicle_bodies(physics, index: int) -> set[int]:
     ({"traffic": {"vehicles": {"ahead": -1}}}, "traffic.vehicles.ahead"),
     ({"traffic": {"vehicles": {"speed": [0.2, 0.1]}}}, "traffic.vehicles.speed"),
     ({"traffic": {"vehicles": {"distance": [0.1, 1.0]}}}, "traffic.vehicles.distance"),
+    ({"traffic": {"vehicles": {"ahead": 4, "distance": [0.8, 1.5]}}},
+     "traffic.vehicles.distance"),
     ({"traffic": {"cars": 2}}, "traffic.cars"),
     ({"traffic": {"headway": 0}}, "traffic.headway"),
     ({"traffic": {"pedestrians": {"crossings": [[1, 1]]}}}, "traffic.pedestrians.crossings[0]"),

@@ -36,7 +36,7 @@ from crllk.maps.routes import (
 from crllk.sim import constants as C
 from crllk.sim.movers import PEDESTRIAN_SIZE
 from crllk.tasks.follower import FollowerGains
-from crllk.tasks.traffic_config import TrafficConfig
+from crllk.tasks.traffic_config import START_SPACING, TrafficConfig
 
 Pose = tuple[float, float, float]
 
@@ -55,8 +55,6 @@ YIELD_GAP = 0.02
 """A pedestrian holds while its next step would bring it this close (m) to a Duckiebot."""
 ROADSIDE = 0.36
 """Distance (m) from the road centre line at which pedestrians wait: beyond the road tile."""
-START_SPACING = C.FOOTPRINT_LENGTH + FOLLOW_GAP + 0.05
-"""Least distance (m) between the start positions of two vehicles in one lane."""
 VEHICLE_HEIGHT = OBJECT_SIZES["duckiebot"][2]
 """Height (m) of a Duckiebot's box in recordings."""
 _MAX_LATERAL_ACCELERATION = FollowerGains.max_lateral_acceleration

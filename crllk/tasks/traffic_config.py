@@ -33,6 +33,9 @@ Range = tuple[float, float]
 
 MIN_VEHICLE_DISTANCE = 0.4
 """Least distance (m) along the lanes between the robot's start and a vehicle's."""
+START_SPACING = 0.33
+"""Least distance (m) between the start positions of two vehicles in one lane: a Duckiebot's
+length (0.18 m) and 0.15 m."""
 
 
 @dataclass(frozen=True)
@@ -114,6 +117,11 @@ def _vehicles(value: Any, source: str | Path) -> VehiclesConfig:
     if config.distance[0] < MIN_VEHICLE_DISTANCE:
         raise ConfigError(source, f"{where}.distance", f"must start at least "
                           f"{MIN_VEHICLE_DISTANCE} m from the robot, got {list(config.distance)}")
+    crowded = max(config.ahead, config.opposite)
+    if (crowded - 1) * START_SPACING > config.distance[1] - config.distance[0]:
+        raise ConfigError(source, f"{where}.distance", f"{crowded} vehicles in one lane start "
+                          f"{START_SPACING} m apart: the range {list(config.distance)} is too "
+                          "short")
     return config
 
 
@@ -176,5 +184,5 @@ def _range(value: Any, source: str | Path, where: str) -> Range:
     return (low, high)
 
 
-__all__ = ["MIN_VEHICLE_DISTANCE", "PedestriansConfig", "TrafficConfig", "VehiclesConfig",
-           "parse_traffic"]
+__all__ = ["MIN_VEHICLE_DISTANCE", "START_SPACING", "PedestriansConfig", "TrafficConfig",
+           "VehiclesConfig", "parse_traffic"]
