@@ -17,7 +17,6 @@ behaviour never shifts the spawns of later episodes.
 
 from __future__ import annotations
 
-import itertools
 import math
 from typing import Any
 
@@ -58,7 +57,6 @@ ROADSIDE = 0.36
 VEHICLE_HEIGHT = OBJECT_SIZES["duckiebot"][2]
 """Height (m) of a Duckiebot's box in recordings."""
 _MAX_LATERAL_ACCELERATION = FollowerGains.max_lateral_acceleration
-_PLACEMENT_ATTEMPTS = 100
 
 
 class Traffic:
@@ -100,14 +98,13 @@ class Traffic:
                 "pedestrians": pedestrians}
 
     def _distances(self, rng: np.random.Generator, count: int) -> list[float]:
-        """``count`` start distances (m), at least :data:`START_SPACING` apart."""
+        """``count`` start distances (m) in ``vehicles.distance``, at least
+        :data:`START_SPACING` apart: sorted draws from the range shortened by the spacings,
+        the k-th pushed k spacings on (uniform over the allowed placements)."""
         low, high = self.config.vehicles.distance
-        for _ in range(_PLACEMENT_ATTEMPTS):
-            distances = sorted(rng.uniform(low, high, size=count).tolist())
-            if all(b - a >= START_SPACING for a, b in itertools.pairwise(distances)):
-                return distances
-        raise RuntimeError(f"no start distances {START_SPACING} m apart for {count} vehicles "
-                           f"in [{low}, {high}] m: widen traffic.vehicles.distance")
+        slack = high - (count - 1) * START_SPACING  # >= low: checked with the task file
+        draws = sorted(rng.uniform(low, max(slack, low), size=count).tolist())
+        return [d + k * START_SPACING for k, d in enumerate(draws)]
 
     def _crossing_draws(self, rng: np.random.Generator) -> list[float | int]:
         """[speed (m/s), wait (control steps), crossings done (0)] of a pedestrian's next
