@@ -14,13 +14,15 @@ from gymnasium.utils.env_checker import check_env
 
 import crllk.gym
 from crllk.gym import ENVIRONMENT_IDS, SafetyStep, environment_id
+from crllk.paths import task_names
 
 REPO = Path(__file__).resolve().parent.parent
 
 
 def test_ids_cover_every_task_and_variant():
     assert environment_id("obstacle_loop") == "crllk/ObstacleLoop-v0"
-    assert len(ENVIRONMENT_IDS) == 3 * 4
+    assert len(ENVIRONMENT_IDS) == len(task_names()) * 4
+    assert "crllk/TrafficLoop-v0" in ENVIRONMENT_IDS
     assert {"crllk/SmallLoop-v0", "crllk/Zigzag-State-v0", "crllk/ObstacleLoop-Continuous-v0",
             "crllk/SmallLoop-StateContinuous-v0"} <= set(ENVIRONMENT_IDS)
 

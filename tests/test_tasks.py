@@ -103,11 +103,13 @@ def test_action_spec(make_env, task, observation, action):
 
 @pytest.mark.parametrize(("task", "observation", "action"), CASES, ids=CASE_IDS)
 def test_observations_match_spec_and_are_valid(make_env, task, observation, action):
-    """On reset and every step: keys, shapes and dtypes match the spec; values are finite;
+    """On reset and every step: keys (the observation and one cost per declared constraint,
+    lane and collision among them), shapes and dtypes match the spec; values are finite;
     costs are finite, non-negative and cost_collision is 0 or 1; rewards are finite."""
     env = make_env(task, observation, action, seed=11)
     obs_spec = env.observation_spec()  # before the first reset, as dm_env users ask for it
-    expected = {observation, "cost_lane", "cost_collision"}
+    expected = {observation, *(c.cost_key for c in env.task.config.constraints)}
+    assert {"cost_lane", "cost_collision"} <= expected
     assert set(obs_spec) == expected
     if observation == "pixels":
         assert obs_spec["pixels"].shape == (30, 40, 3)

@@ -173,7 +173,7 @@ def test_existing_run_is_not_overwritten(tmp_path):
 
 @pytest.mark.parametrize(("override", "expected"), [
     ("task=no_such_map", "override: task: unknown choice 'no_such_map' (choices: "
-                         "obstacle_loop, small_loop, zigzag)"),
+                         "obstacle_loop, pedestrian_loop, small_loop, traffic_loop, zigzag)"),
     ("algo.constraints.lane.threshold=-1", "algo.constraints.lane.threshold: must be >= 0"),
     ("total_frames=many", "override: total_frames: Value 'many' of type 'str' could not be "
                           "converted to Integer"),

@@ -69,9 +69,9 @@ from crllk.tasks.lane_keeping import (
     LaneKeeping,
     StepOutcome,
     command_history_length,
+    physics_of,
     state_feature_names,
 )
-from crllk.tasks.randomization import distractor_count, max_delay
 from crllk.tasks.teacher import Teacher
 
 DONE_KEYS = ("done", "terminated", "truncated")
@@ -385,9 +385,7 @@ class BatchedLaneKeepingEnv(EnvBase):
 def _build_physics(config: TaskConfig, num_envs: int, *, share_renderers: bool) -> list[Physics]:
     """Compile the scene once; the other physics share its ``MjModel`` (and, for pixels, its
     camera renderers: one GL context renders every sub-environment's data in turn)."""
-    first = Physics.from_map(config.map, config.motor,
-                             max_delay(config.randomize, config.motor),
-                             distractor_count(config.randomize))
+    first = physics_of(config)
     copies = [first.copy(share_model=True) for _ in range(num_envs - 1)]
     if share_renderers:
         for physics in copies:

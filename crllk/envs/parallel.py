@@ -55,6 +55,8 @@ class TaskView:
     """The loop direction the episode started in (``"intended"``, ``"reverse"`` or None)."""
     hit_object: int | None = None
     """The map object the episode ended on (an index, or None)."""
+    hit_mover: int | None = None
+    """The moving agent the episode ended on (an index: vehicles, then pedestrians; or None)."""
 
 
 class WorkerError(RuntimeError):
@@ -201,8 +203,8 @@ class ParallelLaneKeepingEnv(MirroredTeacherFlag, EnvBase):
         """The workers' outputs as one tensordict of every simulation, in order; their tasks'
         details into :attr:`tasks`."""
         details = [detail for _, worker in outputs for detail in worker]
-        for view, (direction, hit) in zip(self.tasks, details, strict=True):
-            view.start_direction, view.hit_object = direction, hit
+        for view, (direction, hit, mover) in zip(self.tasks, details, strict=True):
+            view.start_direction, view.hit_object, view.hit_mover = direction, hit, mover
         arrays = [out for out, _ in outputs]
         return TensorDict({key: torch.from_numpy(np.concatenate([out[key] for out in arrays]))
                            for key in arrays[0]}, batch_size=self.batch_size,
@@ -307,9 +309,9 @@ def _failure(error: BaseException) -> tuple[str, Any]:
     return "error", traceback.format_exc()
 
 
-def _details(env: BatchedLaneKeepingEnv) -> list[tuple[str | None, int | None]]:
+def _details(env: BatchedLaneKeepingEnv) -> list[tuple[str | None, int | None, int | None]]:
     """Each task's :class:`TaskView` fields (a few bytes per simulation)."""
-    return [(task.start_direction, task.hit_object) for task in env.tasks]
+    return [(task.start_direction, task.hit_object, task.hit_mover) for task in env.tasks]
 
 
 def _arrays(tensordict: TensorDictBase) -> dict[str, np.ndarray]:

@@ -99,7 +99,8 @@ def episode_rows(result: EvaluationResult, action: str) -> list[dict[str, Any]]:
             zip(result.episodes, result.terminations, result.actions, strict=True)):
         reason = termination or ("time_limit" if stats.truncated else None)
         row = {"episode": k, **stats.as_row(), "termination": reason,
-               "direction": _at(result.directions, k), "hit_object": _at(result.hit_objects, k)}
+               "direction": _at(result.directions, k), "hit_object": _at(result.hit_objects, k),
+               "hit_mover": _at(result.hit_movers, k)}
         if action == "discrete":
             counts = np.bincount(np.asarray(actions).reshape(-1).astype(np.int64),
                                  minlength=len(DISCRETE_NAMES))
@@ -114,7 +115,8 @@ def _at(values: Sequence[Any], k: int) -> Any:
 
 def breakdown(result: EvaluationResult, objects: Sequence[Any] = ()) -> dict[str, Any]:
     """The metrics per start direction of the loop, and how many episodes ended on each
-    obstacle (``objects``: the map's, to name them by kind and position)."""
+    obstacle (``objects``: the map's, to name them by kind and position) and on each moving
+    agent (by index: vehicles, then pedestrians)."""
     by_direction = {}
     for direction in ("intended", "reverse"):
         chosen = [e for e, d in zip(result.episodes, result.directions, strict=True)
@@ -127,7 +129,12 @@ def breakdown(result: EvaluationResult, objects: Sequence[Any] = ()) -> dict[str
             obj = objects[index] if index < len(objects) else None
             name = f"{index}" if obj is None else f"{index} {obj.kind} ({obj.x:.2f}, {obj.y:.2f})"
             hits[name] = hits.get(name, 0) + 1
-    return {"by_direction": by_direction, "collisions_by_object": dict(sorted(hits.items()))}
+    movers: dict[str, int] = {}
+    for index in result.hit_movers:
+        if index is not None:
+            movers[str(index)] = movers.get(str(index), 0) + 1
+    return {"by_direction": by_direction, "collisions_by_object": dict(sorted(hits.items())),
+            "collisions_by_mover": dict(sorted(movers.items()))}
 
 
 def result_document(result: EvaluationResult, action: str, *, thresholds: dict[str, float],

@@ -59,6 +59,21 @@ def footprint_points(obj: MapObject, samples: int = _FOOTPRINT_SAMPLES) -> list[
     return points
 
 
+def footprint_gap(a: MapObject, b: MapObject) -> float:
+    """Distance (m) between the footprints of ``a`` and ``b``, from points on each outline
+    (0 when they overlap)."""
+    return min(min(_to_rectangle(x, y, b) for x, y in footprint_points(a, 3)),
+               min(_to_rectangle(x, y, a) for x, y in footprint_points(b, 3)))
+
+
+def _to_rectangle(x: float, y: float, obj: MapObject) -> float:
+    """Distance (m) from a point to an object's footprint rectangle (0 inside)."""
+    c, s = math.cos(obj.yaw), math.sin(obj.yaw)
+    dx, dy = x - obj.x, y - obj.y
+    u, v = c * dx + s * dy, -s * dx + c * dy
+    return math.hypot(max(abs(u) - obj.length / 2, 0.0), max(abs(v) - obj.width / 2, 0.0))
+
+
 def road_band(dmap: DuckietownMap) -> tuple[float, float]:
     """Lateral offsets (m, positive right) of the road's left and right edges from a lane."""
     half = dmap.tile_size / 2
@@ -141,4 +156,5 @@ class ObstacleIndex:
         return out[:count]
 
 
-__all__ = ["LaneObstacle", "ObstacleAhead", "ObstacleIndex", "footprint_points", "road_band"]
+__all__ = ["LaneObstacle", "ObstacleAhead", "ObstacleIndex", "footprint_gap", "footprint_points",
+           "road_band"]

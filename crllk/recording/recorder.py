@@ -115,7 +115,8 @@ def _read_step(env: BatchedLaneKeepingEnv, stepped: TensorDictBase, clock: Clock
                 reward=float(nxt["reward"][0]),
                 costs={c.name: float(nxt[c.cost_key][0]) for c in env.constraints},
                 lateral=outcome.lateral,
-                heading_error=outcome.heading_error)
+                heading_error=outcome.heading_error,
+                movers=tuple(env.tasks[0].mover_boxes))
 
 
 def _play(env: BatchedLaneKeepingEnv, policy: Policy, episodes: int, recorder: StepRecorder,

@@ -13,7 +13,7 @@ from collections.abc import Iterable, Sequence
 
 import rerun as rr
 
-from crllk.maps import DuckietownMap
+from crllk.maps import DuckietownMap, MapObject
 from crllk.maps.markings import (
     WHITE_WIDTH,
     lane_centre_strips,
@@ -81,7 +81,11 @@ def tile_boxes(dmap: DuckietownMap) -> rr.Boxes3D:
 
 def object_boxes(dmap: DuckietownMap) -> rr.Boxes3D:
     """The map's objects as their collision boxes (length along their yaw)."""
-    objs = dmap.objects
+    return boxes(dmap.objects)
+
+
+def boxes(objs: Sequence[MapObject]) -> rr.Boxes3D:
+    """Objects (map objects, moving agents) as their boxes (length along their yaw)."""
     return rr.Boxes3D(
         centers=[(o.x, o.y, o.height / 2) for o in objs],
         half_sizes=[(o.length / 2, o.width / 2, o.height / 2) for o in objs],
@@ -161,4 +165,5 @@ def log_series_styles(rec: rr.RecordingStream, constraints: Sequence[Constraint]
                                       marker_sizes=_EPISODE_MARKER_SIZE), static=True)
 
 
-__all__ = ["focal_length", "log_scene", "log_series_styles", "object_boxes", "tile_boxes"]
+__all__ = ["boxes", "focal_length", "log_scene", "log_series_styles", "object_boxes",
+           "tile_boxes"]

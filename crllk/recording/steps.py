@@ -18,7 +18,7 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from crllk.envs.episodes import EpisodeStats
-from crllk.maps import DuckietownMap
+from crllk.maps import DuckietownMap, MapObject
 from crllk.maps.markings import LANE_HEIGHT
 from crllk.recording.blueprint import episode_ranges, make_blueprint
 from crllk.recording.entities import (
@@ -30,13 +30,14 @@ from crllk.recording.entities import (
     IMAGE,
     LAGRANGE_PREFIX,
     LATERAL,
+    MOVERS,
     REWARD,
     ROBOT,
     TRAIL,
     cost_path,
     episode_path,
 )
-from crllk.recording.scene import log_scene, log_series_styles
+from crllk.recording.scene import boxes, log_scene, log_series_styles
 from crllk.recording.sinks import FLUSH_TIMEOUT_S
 from crllk.sim import constants as C
 from crllk.sim.physics import Physics
@@ -75,6 +76,8 @@ class Step:
     """Per-step cost by constraint name."""
     lateral: float
     heading_error: float
+    movers: tuple[MapObject, ...] = ()
+    """The task's moving agents' boxes (none without traffic)."""
 
 
 class ScalarColumns:
@@ -168,6 +171,8 @@ class StepRecorder:
             xyzw=[0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2)])))
         rec.log(TRAIL, rr.LineStrips3D([self.trail]))
         rec.log(IMAGE, rr.Image(step.image))
+        if step.movers:
+            rec.log(MOVERS, boxes(step.movers))
         values = {REWARD: step.reward,
                   **{cost_path(name): value for name, value in step.costs.items()},
                   LATERAL: step.lateral,

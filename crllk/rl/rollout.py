@@ -29,7 +29,8 @@ from crllk.tasks.constraints import Constraint
 class EvaluationResult:
     """Finished episodes in episode order, their summary and the actions taken per episode;
     ``directions`` the loop direction each started in (``"intended"``, ``"reverse"`` or None)
-    and ``hit_objects`` the map object each ended on (an index, or None)."""
+    ``hit_objects`` the map object each ended on (an index, or None) and ``hit_movers`` the
+    moving agent (an index, vehicles then pedestrians, or None)."""
 
     episodes: list[EpisodeStats]
     summary: Summary
@@ -38,6 +39,7 @@ class EvaluationResult:
     actions: list[np.ndarray] = field(default_factory=list)
     directions: list[str | None] = field(default_factory=list)
     hit_objects: list[int | None] = field(default_factory=list)
+    hit_movers: list[int | None] = field(default_factory=list)
 
 
 class Rollout:
@@ -118,7 +120,8 @@ def _run_episodes(env: LaneKeepingEnv, policy: Callable[[TensorDictBase], Tensor
                 by_env[i].append((stats, TERMINATIONS[terminations[i]],
                                   np.stack(current_actions[i]),
                                   getattr(tasks[i], "start_direction", None),
-                                  getattr(tasks[i], "hit_object", None)))
+                                  getattr(tasks[i], "hit_object", None),
+                                  getattr(tasks[i], "hit_mover", None)))
                 played[i] += 1
             current_actions[i] = []
 
@@ -133,7 +136,8 @@ def _run_episodes(env: LaneKeepingEnv, policy: Callable[[TensorDictBase], Tensor
                             terminations=[entry[1] for entry in ordered],
                             actions=[entry[2] for entry in ordered],
                             directions=[entry[3] for entry in ordered],
-                            hit_objects=[entry[4] for entry in ordered])
+                            hit_objects=[entry[4] for entry in ordered],
+                            hit_movers=[entry[5] for entry in ordered])
 
 
 __all__ = ["EvaluationResult", "Rollout", "collect", "episode_quotas", "run_episodes"]

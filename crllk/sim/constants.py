@@ -15,6 +15,12 @@ OVERHEAD_CAMERA = "overhead"
 OBSTACLE_PREFIX = "obstacle/"
 DISTRACTOR_PREFIX = "distractor/"
 """Names of the flat distractor patches a randomised scene scatters beside the road."""
+VEHICLE_PREFIX = "vehicle/"
+"""Other Duckiebots driving along the lanes: bodies ``vehicle/<k>/chassis``."""
+PEDESTRIAN_PREFIX = "pedestrian/"
+"""Duckies crossing the road: bodies ``pedestrian/<k>``."""
+MOVER_FOOTPRINT = "footprint"
+"""Name (after a mover's prefix) of each mover's collision box."""
 
 WHEEL_RADIUS = 0.0318
 """Kinematic wheel radius (m)."""

@@ -20,7 +20,8 @@ from crllk.maps import DuckietownMap
 from crllk.sim import constants as C
 from crllk.sim.culling import FrustumCuller, cullable, hidden_geoms
 from crllk.sim.motor import MotorConfig, clip_duty
-from crllk.sim.scene import compile_scene
+from crllk.sim.movers import Movers, add_movers
+from crllk.sim.scene import build_spec
 from crllk.sim.variation import (
     SceneVariation,
     VariationTargets,
@@ -96,14 +97,20 @@ warm start, ctrl, applied forces, mocap, equality flags, user data and plugin st
 
 
 class Physics(dm_mujoco.Physics):
-    """A Duckietown scene with one Duckiebot. Lengths in m, angles in rad, times in s."""
+    """A Duckietown scene with one Duckiebot (and, with traffic, moving agents beside it).
+    Lengths in m, angles in rad, times in s."""
 
     @classmethod
     def from_map(cls, dmap: DuckietownMap, motor: MotorConfig | None = None,
-                 max_delay: float = 0.0, distractors: int = 0) -> Physics:
+                 max_delay: float = 0.0, distractors: int = 0, vehicles: int = 0,
+                 pedestrians: int = 0) -> Physics:
         """Build and compile the scene of ``dmap`` with the Duckiebot (command delays up to
-        ``max_delay`` s and ``distractors`` patches possible by :meth:`set_variation`)."""
-        physics = cls.from_model(MjModel(compile_scene(dmap, motor, max_delay, distractors)))
+        ``max_delay`` s and ``distractors`` patches possible by :meth:`set_variation`), and
+        ``vehicles`` other Duckiebots and ``pedestrians`` duckies moved by
+        :meth:`set_mover_poses` (:mod:`crllk.sim.movers`)."""
+        spec = build_spec(dmap, motor, max_delay, distractors)
+        add_movers(spec, vehicles, pedestrians)
+        physics = cls.from_model(MjModel(spec.compile()))
         physics.motor = physics.nominal_motor = motor or MotorConfig()
         return physics
 
@@ -150,6 +157,8 @@ class Physics(dm_mujoco.Physics):
         self._is_obstacle = np.zeros(self.model.ngeom, dtype=bool)
         self._is_obstacle[self._obstacle_geoms] = True
         self._footprint_geom = self.model.name2id(C.FOOTPRINT_GEOM, "geom")
+        self.movers = Movers(self.model.ptr)
+        """The scene's moving agents (:class:`~crllk.sim.movers.Movers`)."""
         self._root_qpos = self.model.jnt_qposadr[self.model.name2id(C.ROOT_JOINT, "joint")]
         self._root_qvel = self.model.jnt_dofadr[self.model.name2id(C.ROOT_JOINT, "joint")]
         # Raw MuJoCo handles and views into the data's buffers for the per-step hot path.
@@ -196,7 +205,17 @@ class Physics(dm_mujoco.Physics):
         return bool(np.any(((g1 == footprint) & obstacle[g2])
                            | ((g2 == footprint) & obstacle[g1])))
 
+    def touched_mover(self) -> int | None:
+        """The moving agent (index in :attr:`movers`: vehicles, then pedestrians) whose
+        collision box the chassis footprint touches, or None."""
+        return self.movers.touched(self._mj_data, self._footprint_geom)
+
     # ----- commands ---------------------------------------------------------------------
+    def set_mover_poses(self, poses: Sequence[tuple[float, float, float]]) -> None:
+        """Place moving agent k at ``poses[k]`` = (x, y, yaw) on the floor (its body frame;
+        a vehicle's at its axle). Positions are current after the next step or forward."""
+        self.movers.set_poses(self._mj_data, poses)
+
     def set_pose(self, x: float, y: float, yaw: float) -> None:
         """Place the robot at rest with its wheels on the floor."""
         a = self._root_qpos

@@ -198,7 +198,13 @@ def _add_obstacle(spec: mujoco.MjSpec, obj: MapObject, index: int) -> None:
                       size=[obj.length / 2, obj.width / 2, obj.height / 2],
                       pos=[0, 0, obj.height / 2], contype=_OBSTACLE_CONTYPE,
                       conaffinity=_OBSTACLE_CONAFFINITY, group=3, rgba=[1, 0, 0, 0.2])
-    for geom_type, size, pos, rgba in _parts(obj.kind):
+    add_object_parts(body, obj.kind, dims)
+
+
+def add_object_parts(body: mujoco.MjsBody, kind: str, dims: np.ndarray) -> None:
+    """The visual primitives of an object of ``kind`` whose footprint box is ``dims``
+    (length, width, height) (m), in ``body``'s frame (the box standing on its origin)."""
+    for geom_type, size, pos, rgba in _parts(kind):
         scaled_size = _scale_size(geom_type, np.array(size), dims)
         body.add_geom(type=geom_type, size=scaled_size, pos=(np.array(pos) * dims).tolist(),
                       rgba=rgba, contype=0, conaffinity=0, group=1)

@@ -22,6 +22,7 @@ from crllk.sim.constants import PHYSICS_TIMESTEP
 from crllk.sim.motor import MotorConfig
 from crllk.tasks.constraints import AGGREGATES, BUILTIN, DEFAULT, SIGNALS, Constraint
 from crllk.tasks.randomization import RandomizeConfig, parse_randomize
+from crllk.tasks.traffic_config import TrafficConfig, parse_traffic
 from crllk.yaml_files import read_yaml
 
 
@@ -83,6 +84,9 @@ class TaskConfig:
     """What the task constrains (:mod:`crllk.tasks.constraints`); its costs, in this order."""
     randomize: RandomizeConfig | None = None
     """Per-episode domain randomisation (:mod:`crllk.tasks.randomization`); None: off."""
+    traffic: TrafficConfig | None = None
+    """Other Duckiebots and duckie pedestrians (:mod:`crllk.tasks.traffic_config`); None:
+    none."""
 
     @property
     def control_timestep(self) -> float:
@@ -142,11 +146,13 @@ def parse_task(settings: Mapping[str, Any], *, name: str, dmap: DuckietownMap,
             kwargs[key] = parse_constraints(value, source)
         elif key == "randomize":
             kwargs[key] = parse_randomize(value, source)
+        elif key == "traffic":
+            kwargs[key] = parse_traffic(value, source, dmap)
         elif key in _SCALARS:
             kwargs[key] = _check_value(TaskConfig, key, value, source, key)
         else:
-            raise ConfigError(source, key, f"unknown setting (known: map, "
-                              f"{', '.join((*_SCALARS, *_SECTIONS, 'constraints', 'randomize'))})")
+            known = (*_SCALARS, *_SECTIONS, "constraints", "randomize", "traffic")
+            raise ConfigError(source, key, f"unknown setting (known: map, {', '.join(known)})")
     config = TaskConfig(name=name, map=dmap, source=str(source), **kwargs)
     if config.horizon <= 0:
         raise ConfigError(source, "horizon", f"must be positive, got {config.horizon}")
@@ -158,6 +164,11 @@ def parse_task(settings: Mapping[str, Any], *, name: str, dmap: DuckietownMap,
     if config.spawn.encounter_distance[0] < 0:
         raise ConfigError(source, "spawn.encounter_distance",
                           f"must be non-negative, got {list(config.spawn.encounter_distance)}")
+    for k, constraint in enumerate(config.constraints):
+        if constraint.signal == "headway" and not (config.traffic
+                                                   and config.traffic.vehicles.count):
+            raise ConfigError(source, f"constraints[{k}]", f"{constraint.name!r} measures the "
+                              "headway to vehicles: declare traffic.vehicles")
     substeps = _PHYSICS_RATE / config.control_rate
     if abs(substeps - round(substeps)) > 1e-9:
         raise ConfigError(source, "control_rate",
@@ -168,8 +179,8 @@ def parse_task(settings: Mapping[str, Any], *, name: str, dmap: DuckietownMap,
 
 def parse_constraints(value: Any, source: str | Path) -> tuple[Constraint, ...]:
     """A task's ``constraints``: a list whose entries name a built-in constraint (``lane``,
-    ``collision``, ``crossing``) or spell one out as a mapping with ``name``, ``signal``,
-    ``aggregate``, ``unit`` and ``metric``."""
+    ``collision``, ``crossing``, ``headway``) or spell one out as a mapping with ``name``,
+    ``signal``, ``aggregate``, ``unit`` and ``metric``."""
     if not isinstance(value, list | tuple) or not value:
         raise ConfigError(source, "constraints", f"expected a non-empty list, got {value!r}")
     out: list[Constraint] = []

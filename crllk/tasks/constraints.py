@@ -9,6 +9,7 @@ declaration, so adding a constraint is a change of the task's settings, not of t
 
     constraints: [lane, collision]             # the paper's two (the default)
     constraints: [lane, collision, crossing]   # and the lane-crossing cost of C-CRLLK
+    constraints: [lane, collision, headway]    # and tailgating, with traffic
 """
 
 from __future__ import annotations
@@ -22,9 +23,12 @@ AGGREGATES = ("mean", "sum")
 SIGNALS = {
     "lane_deviation": "|lateral offset| from the lane centre (dm); the task's off_road_lane_cost "
                       "off the road",
-    "collision": "1 on the step that ends on an obstacle or off the road, else 0",
+    "collision": "1 on the step that ends on an obstacle, a moving agent (another Duckiebot, a "
+                 "pedestrian) or off the road, else 0",
     "lane_crossing": "1 on a step where the robot's centre crosses a lane line (the yellow "
                      "centre line or the white edge line), else 0",
+    "headway": "1 on a step that ends with the gap from the robot's front to the nearest "
+               "vehicle ahead in its lane below the task's traffic.headway (m), else 0",
 }
 """Per-step signals the lane-keeping task computes, by name."""
 
@@ -64,6 +68,7 @@ BUILTIN = {
     "lane": Constraint("lane", "lane_deviation", "mean", "dm", "J_clane"),
     "collision": Constraint("collision", "collision", "sum", "per episode", "J_coll"),
     "crossing": Constraint("crossing", "lane_crossing", "sum", "per episode", "J_ccross"),
+    "headway": Constraint("headway", "headway", "mean", "fraction of steps", "J_chead"),
 }
 """Constraints a task may name without spelling them out."""
 DEFAULT = ("lane", "collision")

@@ -6,8 +6,9 @@ forward progress along the lane (m); the task computes every per-step signal of
 step that ends in a collision or a road departure; 1 on a step that crosses a lane line outside
 intersections) and reports ``cost_<name>`` for each constraint the task declares
 (``constraints``). The episode terminates (discount 0) when a footprint check point leaves the
-road (also past a dead end of an open road), the chassis touches an obstacle or the physics
-diverges; the 512-step time limit is a truncation.
+road (also past a dead end of an open road), the chassis touches an obstacle or a moving agent
+(:mod:`crllk.tasks.traffic`, moved before each step) or the physics diverges; the 512-step
+time limit is a truncation.
 
 It stays one file, over 350 lines: the task is one dm-control ``Task`` whose spawn, step, cost
 and observation hooks all read and write the same episode state (:class:`EpisodeState`), and it
@@ -16,6 +17,7 @@ reads top to bottom as a task of dm_control's suite does.
 
 from __future__ import annotations
 
+import copy
 import functools
 import math
 from dataclasses import asdict, dataclass, field
@@ -39,6 +41,7 @@ from crllk.tasks.config import TaskConfig, load_task_config
 from crllk.tasks.constraints import Constraint
 from crllk.tasks.frames import robot_camera_image
 from crllk.tasks.randomization import distractor_count, draw_variation, max_delay
+from crllk.tasks.traffic import Traffic
 
 OBSERVATIONS = ("pixels", "state")
 
@@ -102,6 +105,10 @@ class EpisodeState:
     """Control steps taken in the episode (the frame counter of the sensor noise)."""
     hit_object: int | None = None
     """Index in the map's objects of the obstacle the episode ended on, if any."""
+    hit_mover: int | None = None
+    """Index of the moving agent the episode ended on (vehicles, then pedestrians), if any."""
+    traffic: dict[str, Any] | None = None
+    """The movers' state (:meth:`crllk.tasks.traffic.Traffic.reset`), None without traffic."""
 
 
 def state_feature_names(config: TaskConfig) -> list[str]:
@@ -153,6 +160,9 @@ class LaneKeeping(control.Task):
         """The map's objects the robot collides with."""
         self._lane_lines = (-LANE_OFFSET, white_lateral(self.map.tile_size))
         """Lateral offsets (m) of the yellow centre line and the white edge line."""
+        self.traffic = (None if config.traffic is None
+                        else Traffic(config.traffic, self.map, config.control_timestep))
+        """The task's moving agents (None: none)."""
         self._blocking = [(lane, o) for lane in self.map.lanes
                           for o in self.obstacles.on_lane(lane)
                           if o.lateral_left < _BLOCKING_HALF_WIDTH
@@ -185,15 +195,20 @@ class LaneKeeping(control.Task):
                                             self._offroad_cells, self.map.tile_size)
             physics.set_variation(self.variation)
         physics.set_pose(x, y, yaw)
-        physics.forward()
         pose = self.map.lane_pose(x, y, yaw)
+        traffic = None
+        if self.traffic is not None:
+            traffic = self.traffic.reset(self.random, pose.lane, pose.along)
+            physics.set_mover_poses(self.traffic.poses(traffic))
+        physics.forward()
         signals = {"lane_deviation": self._lane_cost(pose), "collision": 0.0,
-                   "lane_crossing": 0.0}
+                   "lane_crossing": 0.0, "headway": self._headway(traffic, pose)}
         self.episode = EpisodeState(
             history=[(0.0, 0.0)] * command_history_length(self.config),
             previous_pose=(x, y, yaw), outcome=self._outcome(0.0, pose, signals, None),
             encounter=encounter, start_direction=self.map.direction_of(pose.lane),
-            variation=None if self.variation is None else self.variation.as_dict())
+            variation=None if self.variation is None else self.variation.as_dict(),
+            traffic=traffic)
         self.after_step(physics)  # the spawn's outcome; frames count from 1 (per-frame noise)
 
     def _draw_encounter(self) -> bool:
@@ -253,6 +268,9 @@ class LaneKeeping(control.Task):
         self.episode.history = [duty, *self.episode.history[:-1]]
         self.episode.previous_pose = physics.pose()
         physics.set_wheel_duty(duty)
+        if self.traffic is not None:
+            self.traffic.step(self.episode.traffic, self.episode.previous_pose)
+            physics.set_mover_poses(self.traffic.poses(self.episode.traffic))
 
     def after_step(self, physics: Physics) -> None:
         self.episode.steps += 1
@@ -272,12 +290,16 @@ class LaneKeeping(control.Task):
             self.episode.hit_object = min(
                 (k for k, obj in enumerate(self.map.objects) if obj.collidable),
                 key=lambda k: _footprint_gap(self.map.objects[k], x, y, yaw))
+        elif self.traffic is not None and (mover := physics.touched_mover()) is not None:
+            termination = "collision"
+            self.episode.hit_mover = mover
         off_road = termination == "off_road" or not pose.on_road
         signals = {
             "lane_deviation": self.config.off_road_lane_cost if off_road
             else self._lane_cost(pose),
             "collision": 1.0 if termination in ("off_road", "collision") else 0.0,
             "lane_crossing": 1.0 if self._crosses_line(previous, pose) else 0.0,
+            "headway": self._headway(self.episode.traffic, pose),
         }
         self.episode.outcome = self._outcome(progress, pose, signals, termination)
 
@@ -296,6 +318,14 @@ class LaneKeeping(control.Task):
             return False
         return any((before.lateral - line) * (after.lateral - line) < 0.0
                    for line in self._lane_lines)
+
+    def _headway(self, traffic: dict[str, Any] | None, pose: LanePose) -> float:
+        """The headway signal: 1 when the gap to the vehicle ahead in the robot's lane is
+        below ``traffic.headway`` (m), else 0 (always 0 without traffic)."""
+        if traffic is None:
+            return 0.0
+        gap = self.traffic.headway(traffic, pose.lane, pose.along)
+        return 1.0 if gap is not None and gap < self.config.traffic.headway else 0.0
 
     def _lane_cost(self, pose: LanePose) -> float:
         if not pose.on_road:
@@ -335,6 +365,17 @@ class LaneKeeping(control.Task):
     def hit_object(self) -> int | None:
         return self.episode.hit_object
 
+    @property
+    def hit_mover(self) -> int | None:
+        return self.episode.hit_mover
+
+    @property
+    def mover_boxes(self) -> list[MapObject]:
+        """The moving agents' footprint boxes now (none without traffic)."""
+        if self.traffic is None:
+            return []
+        return self.traffic.boxes(self.episode.traffic)
+
     # ----- snapshots --------------------------------------------------------------------
     def episode_state(self) -> dict[str, Any]:
         """The whole :class:`EpisodeState` and the spawn generator's state, as plain Python
@@ -352,6 +393,7 @@ class LaneKeeping(control.Task):
         episode["history"] = [tuple(duty) for duty in episode["history"]]
         if episode["previous_pose"] is not None:
             episode["previous_pose"] = tuple(episode["previous_pose"])
+        episode["traffic"] = copy.deepcopy(episode.get("traffic"))  # stepped in place
         self.episode = EpisodeState(**episode)
         variation = episode.get("variation")
         self.variation = None if variation is None else SceneVariation.from_dict(variation)
@@ -467,6 +509,15 @@ def _footprint_gap(obj: MapObject, x: float, y: float, yaw: float) -> float:
     return min(to_object, to_robot)
 
 
+def physics_of(config: TaskConfig) -> Physics:
+    """The compiled scene of a task: its map, motors, randomisation's patches and movers."""
+    traffic = config.traffic
+    return Physics.from_map(config.map, config.motor, max_delay(config.randomize, config.motor),
+                            distractor_count(config.randomize),
+                            vehicles=0 if traffic is None else traffic.vehicles.count,
+                            pedestrians=0 if traffic is None else traffic.pedestrians.count)
+
+
 def load(task: str | Path, *, observation: str = "pixels", action: str = "discrete",
          seed: int | np.random.RandomState | None = None,
          overrides: dict[str, Any] | None = None) -> control.Environment:
@@ -482,9 +533,7 @@ def load(task: str | Path, *, observation: str = "pixels", action: str = "discre
         overrides: task settings to replace, e.g. ``{"horizon": 64}``.
     """
     config = load_task_config(task, overrides)
-    physics = Physics.from_map(config.map, config.motor,
-                               max_delay(config.randomize, config.motor),
-                               distractor_count(config.randomize))
+    physics = physics_of(config)
     lane_task = LaneKeeping(config, observation=observation, action=action, random=seed)
     steps = config.step_limit()  # a time in seconds for dm-control, a hair under the limit
     return control.Environment(

@@ -1,0 +1,131 @@
+"""Where moving agents go: along the lanes (vehicles) and across the road (pedestrians).
+
+A position on the road network is a lane and a distance along it from the lane's entry edge.
+Vehicles move by :func:`advance`, which follows :meth:`DuckietownMap.next_lane` (straight on at
+intersections) and stops at the end of an open road. :func:`distance_ahead` measures, in the
+lane frame, how far ahead along a route the nearest of some points lies within a band about
+the lane centre (what a vehicle keeps its distance to, and the robot's headway).
+A :class:`Crossing` is a straight walk across a straight road tile through its centre.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from crllk.maps.lanes import Lane
+from crllk.maps.road import DuckietownMap
+
+LANE_HALF_WIDTH = 0.105
+"""Half the lane's width (m): 21 cm from the white line's inner edge to the yellow line."""
+
+
+def advance(dmap: DuckietownMap, lane: Lane, along: float,
+            distance: float) -> tuple[Lane, float]:
+    """The position ``distance`` (m, non-negative) further along the lanes from ``along`` on
+    ``lane``; at the end of an open road, that end."""
+    along += distance
+    while along > lane.length:
+        following = dmap.next_lane(lane)
+        if following is None:
+            return lane, lane.length
+        along -= lane.length
+        lane = following
+    return lane, along
+
+
+def opposite_lane(dmap: DuckietownMap, lane: Lane) -> Lane | None:
+    """The lane of the same tile that runs the other way (entering where ``lane`` leaves)."""
+    return next((other for other in dmap.tile_lanes(lane.column, lane.row)
+                 if other.entry == lane.exit and other.exit == lane.entry), None)
+
+
+def opposite_position(dmap: DuckietownMap, lane: Lane, along: float) -> tuple[Lane, float]:
+    """The position in the opposite lane beside ``along`` on ``lane``.
+
+    Raises:
+        ValueError: if no lane of the tile runs the other way.
+    """
+    other = opposite_lane(dmap, lane)
+    if other is None:
+        raise ValueError(f"tile {lane.column, lane.row} has no lane from {lane.exit} to "
+                         f"{lane.entry}")
+    x, y, _ = lane.point_at(along)
+    return other, min(max(other.project(x, y).along, 0.0), other.length)
+
+
+def distance_ahead(dmap: DuckietownMap, lane: Lane, along: float,
+                   points: list[tuple[float, float]], half_width: float,
+                   reach: float) -> float | None:
+    """Distance (m) along the lanes from ``along`` on ``lane`` to the nearest of ``points``
+    ahead that lies within ``half_width`` (m) of the lane centre, up to ``reach`` (m); None
+    when there is none. Each point is measured against the route's lane on its tile."""
+    on_tile: dict[tuple[int, int], tuple[Lane, float]] = {}
+    offset, current = -along, lane
+    while current is not None and offset <= reach:
+        on_tile.setdefault((current.column, current.row), (current, offset))
+        offset += current.length
+        current = dmap.next_lane(current)
+        if current is lane:
+            break
+    nearest = None
+    for x, y in points:
+        found = on_tile.get(dmap.tile_index(x, y))
+        if found is None:
+            continue
+        route_lane, start = found
+        projection = route_lane.project(x, y)
+        distance = start + projection.along
+        if abs(projection.lateral) <= half_width and 0.0 <= distance <= reach \
+                and (nearest is None or distance < nearest):
+            nearest = distance
+    return nearest
+
+
+@dataclass(frozen=True)
+class Crossing:
+    """A walk across the straight road tile (``column``, ``row``) through its centre,
+    perpendicular to the road, from ``reach`` (m) beyond the road centre line on one side to as
+    far on the other. ``side`` 0 starts on the right of the tile's lane heading ``heading``
+    (rad), side 1 on its left."""
+
+    column: int
+    row: int
+    centre: tuple[float, float]
+    heading: float
+    """Heading (rad) of one of the tile's lanes (the other runs the opposite way)."""
+    reach: float
+
+    @property
+    def length(self) -> float:
+        """Length of the walk (m)."""
+        return 2.0 * self.reach
+
+    def point_at(self, walked: float, side: int) -> tuple[float, float, float]:
+        """World pose (x, y, heading) after walking ``walked`` metres from ``side``."""
+        # Side 0 starts right of ``heading`` and walks left: heading + pi/2.
+        direction = self.heading + (math.pi / 2 if side == 0 else -math.pi / 2)
+        start = self.reach - walked
+        cx, cy = self.centre
+        return (cx - start * math.cos(direction), cy - start * math.sin(direction),
+                math.atan2(math.sin(direction), math.cos(direction)))
+
+
+def crossing(dmap: DuckietownMap, column: int, row: int, reach: float) -> Crossing:
+    """The :class:`Crossing` of straight road tile (``column``, ``row``).
+
+    Raises:
+        ValueError: if the tile is off the map or not a straight road.
+    """
+    if not (0 <= column < dmap.columns and 0 <= row < dmap.rows):
+        raise ValueError(f"tile {[column, row]} is off the {dmap.columns}x{dmap.rows} map")
+    tile = dmap.tile(column, row)
+    if tile.kind != "straight":
+        raise ValueError(f"tile {[column, row]} is {tile.label!r}, not a straight road")
+    s = dmap.tile_size
+    centre = ((column + 0.5) * s, (dmap.rows - 1 - row + 0.5) * s)
+    return Crossing(column, row, centre, dmap.tile_lanes(column, row)[0].start_heading, reach)
+
+
+__all__ = ["LANE_HALF_WIDTH", "Crossing", "advance", "crossing", "distance_ahead",
+           "opposite_lane", "opposite_position"]

@@ -1,0 +1,131 @@
+"""Moving agents in the scene: other Duckiebots and duckie pedestrians as mocap bodies.
+
+Movers are kinematic: the task sets each one's pose every control step
+(:meth:`Movers.set_poses`) and MuJoCo carries it through the physics steps without
+integrating it, so traffic costs no degrees of freedom and cannot destabilise the physics. A
+vehicle is the Duckiebot of ``assets/mjcf/duckiebot.xml`` without its joints, actuators,
+cameras and wheel contacts; a pedestrian is the map's duckie. Each carries an invisible
+collision box of its footprint that, like the static obstacles, touches only the robot's
+chassis, so a contact is a collision of the robot with it. Their poses live in the MuJoCo data
+(``mocap_pos``, ``mocap_quat``), which every full-state snapshot holds.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import mujoco
+import numpy as np
+
+from crllk.maps.objects import OBJECT_SIZES
+from crllk.paths import DUCKIEBOT_XML
+from crllk.sim import constants as C
+from crllk.sim.scene import add_object_parts
+
+PEDESTRIAN_HEIGHT = 0.08
+"""Height of a duckie pedestrian (m)."""
+PEDESTRIAN_SIZE = tuple(v * PEDESTRIAN_HEIGHT / OBJECT_SIZES["duckie"][2]
+                        for v in OBJECT_SIZES["duckie"])
+"""A pedestrian's footprint length x width x height (m), the map's duckie scaled."""
+_CHASSIS = "chassis"
+_MOVER_CONTYPE, _MOVER_CONAFFINITY = 0, 2
+"""Movers touch only the robot's chassis footprint (contype 2), as obstacles do."""
+
+
+def vehicle_name(index: int) -> str:
+    """Prefix of vehicle ``index``'s elements."""
+    return f"{C.VEHICLE_PREFIX}{index}/"
+
+
+def pedestrian_name(index: int) -> str:
+    """Name of pedestrian ``index``'s body (and prefix of its footprint)."""
+    return f"{C.PEDESTRIAN_PREFIX}{index}"
+
+
+def add_movers(spec: mujoco.MjSpec, vehicles: int, pedestrians: int) -> None:
+    """Add ``vehicles`` Duckiebots and ``pedestrians`` duckies as mocap bodies to ``spec``."""
+    for index in range(vehicles):
+        spec.attach(_vehicle_spec(), prefix=vehicle_name(index),
+                    frame=spec.worldbody.add_frame())
+    length, width, height = PEDESTRIAN_SIZE
+    for index in range(pedestrians):
+        body = spec.worldbody.add_body(name=pedestrian_name(index), mocap=True)
+        body.add_geom(name=f"{pedestrian_name(index)}/{C.MOVER_FOOTPRINT}",
+                      type=mujoco.mjtGeom.mjGEOM_BOX, size=[length / 2, width / 2, height / 2],
+                      pos=[0, 0, height / 2], contype=_MOVER_CONTYPE,
+                      conaffinity=_MOVER_CONAFFINITY, group=3, rgba=[1, 0, 0, 0.2])
+        add_object_parts(body, "duckie", np.array(PEDESTRIAN_SIZE))
+
+
+def _vehicle_spec() -> mujoco.MjSpec:
+    """The Duckiebot as a rigid mocap body: joints, tendons, actuators, cameras and sites
+    removed, wheels and caster not colliding, the footprint touching only the robot."""
+    robot = mujoco.MjSpec.from_file(str(DUCKIEBOT_XML))
+    for element in [*robot.actuators, *robot.tendons, *robot.joints, *robot.cameras,
+                    *robot.sites]:
+        robot.delete(element)
+    robot.body(_CHASSIS).mocap = True
+    for geom in robot.geoms:
+        if geom.name == C.MOVER_FOOTPRINT:
+            geom.contype, geom.conaffinity = _MOVER_CONTYPE, _MOVER_CONAFFINITY
+        elif geom.contype or geom.conaffinity:
+            robot.delete(geom)
+    return robot
+
+
+class Movers:
+    """The movers of a compiled scene: their mocap slots and collision geoms."""
+
+    def __init__(self, model: mujoco.MjModel) -> None:
+        bodies = [model.body(f"{vehicle_name(k)}{_CHASSIS}").id
+                  for k in range(_count(model, C.VEHICLE_PREFIX))]
+        self.vehicles = len(bodies)
+        bodies += [model.body(pedestrian_name(k)).id
+                   for k in range(_count(model, C.PEDESTRIAN_PREFIX))]
+        self.mocap = np.array([model.body_mocapid[b] for b in bodies], dtype=int)
+        """Mocap index of each mover: the vehicles, then the pedestrians."""
+        self.heights = np.array([C.WHEEL_RADIUS] * self.vehicles
+                                + [0.0] * (len(bodies) - self.vehicles))
+        """Height (m) of each mover's body frame above the floor."""
+        self.of_geom = np.full(model.ngeom, -1, dtype=int)
+        """The mover whose collision box each geom is (-1: none)."""
+        for k, body in enumerate(bodies):
+            for geom in range(model.body_geomadr[body],
+                              model.body_geomadr[body] + model.body_geomnum[body]):
+                if model.geom_conaffinity[geom] == _MOVER_CONAFFINITY:
+                    self.of_geom[geom] = k
+
+    def __len__(self) -> int:
+        return len(self.mocap)
+
+    def set_poses(self, data: mujoco.MjData, poses: Sequence[tuple[float, float, float]]) -> None:
+        """Place mover k at ``poses[k]`` = (x, y, yaw) (m, rad) on the floor."""
+        if len(poses) != len(self.mocap):
+            raise ValueError(f"{len(poses)} poses for {len(self.mocap)} movers")
+        for slot, height, (x, y, yaw) in zip(self.mocap, self.heights, poses, strict=True):
+            data.mocap_pos[slot] = (x, y, height)
+            data.mocap_quat[slot] = (math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2))
+
+    def touched(self, data: mujoco.MjData, footprint: int) -> int | None:
+        """The mover whose collision box touches geom ``footprint`` (the lowest index if
+        several do), or None."""
+        if data.ncon == 0 or not len(self.mocap):
+            return None
+        contacts = data.contact
+        g1, g2 = contacts.geom1, contacts.geom2
+        hit = np.concatenate([self.of_geom[g2[g1 == footprint]],
+                              self.of_geom[g1[g2 == footprint]]])
+        hit = hit[hit >= 0]
+        return int(hit.min()) if hit.size else None
+
+
+def _count(model: mujoco.MjModel, prefix: str) -> int:
+    """How many movers named ``<prefix><k>...`` the model's mocap bodies hold."""
+    names = {model.body(b).name for b in range(model.nbody) if model.body_mocapid[b] >= 0}
+    return len({name[len(prefix):].split("/", 1)[0] for name in names
+                if name.startswith(prefix)})
+
+
+__all__ = ["PEDESTRIAN_HEIGHT", "PEDESTRIAN_SIZE", "Movers", "add_movers", "pedestrian_name",
+           "vehicle_name"]

@@ -1,0 +1,204 @@
+"""A task's traffic: where its movers start, how they move each control step, and the robot's
+headway to the vehicle ahead.
+
+Movers are kinematic (:mod:`crllk.sim.movers`). A vehicle rides the lane centre as the scripted
+lane follower aims to (:mod:`crllk.tasks.follower`): at its cruising speed, slower in curves
+(the follower's lateral acceleration limit) and slower still behind whatever is ahead in its
+lane, the robot included, stopping :data:`FOLLOW_GAP` short of it. A pedestrian stands at the
+roadside of its crossing, then walks across, waits and walks back. Movers yield: neither moves
+into the robot, so every collision is the robot's own doing.
+
+The traffic's state is plain values (:meth:`Traffic.reset` returns it, :meth:`Traffic.step`
+updates it in place) kept in the task's episode state, so snapshots hold it. Each episode
+takes one number from the task's generator, the episode's traffic seed; every draw of the
+episode (start distances, speeds, waits) comes from generators keyed by it, so a policy's
+behaviour never shifts the spawns of later episodes.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from crllk.maps import DuckietownMap, Lane, MapObject
+from crllk.maps.objects import OBJECT_SIZES
+from crllk.maps.obstacles import footprint_gap, footprint_points
+from crllk.maps.routes import (
+    LANE_HALF_WIDTH,
+    advance,
+    crossing,
+    distance_ahead,
+    opposite_position,
+)
+from crllk.sim import constants as C
+from crllk.sim.movers import PEDESTRIAN_SIZE
+from crllk.tasks.follower import FollowerGains
+from crllk.tasks.traffic_config import START_SPACING, TrafficConfig
+
+Pose = tuple[float, float, float]
+
+FRONT = C.FOOTPRINT_LENGTH / 2 - C.FOOTPRINT_CENTRE_BEHIND_AXLE
+"""Reach of a Duckiebot's footprint ahead of its axle (m)."""
+FOLLOW_GAP = 0.1
+"""Gap (m) a vehicle keeps, standing, behind what is ahead in its lane."""
+FOLLOW_TIME = 1.0
+"""Time (s) a vehicle takes to close the gap beyond FOLLOW_GAP: its speed is at most
+(gap - FOLLOW_GAP) / FOLLOW_TIME."""
+LOOKAHEAD = 1.0
+"""How far ahead (m) a vehicle looks for what is in its lane."""
+CORRIDOR_MARGIN = 0.03
+"""A vehicle slows for what comes within its half-width plus this (m) of its lane centre."""
+YIELD_GAP = 0.02
+"""A pedestrian holds while its next step would bring it this close (m) to a Duckiebot."""
+ROADSIDE = 0.36
+"""Distance (m) from the road centre line at which pedestrians wait: beyond the road tile."""
+VEHICLE_HEIGHT = OBJECT_SIZES["duckiebot"][2]
+"""Height (m) of a Duckiebot's box in recordings."""
+_MAX_LATERAL_ACCELERATION = FollowerGains.max_lateral_acceleration
+
+
+class Traffic:
+    """The movers of a task on its map, stepped every ``control_timestep`` (s)."""
+
+    def __init__(self, config: TrafficConfig, dmap: DuckietownMap, control_timestep: float):
+        self.config = config
+        self.map = dmap
+        self.dt = control_timestep
+        self.crossings = [crossing(dmap, column, row, ROADSIDE)
+                          for column, row in config.pedestrians.crossings]
+        self._lane_index = {lane: k for k, lane in enumerate(dmap.lanes)}
+
+    @property
+    def vehicles(self) -> int:
+        return self.config.vehicles.count
+
+    @property
+    def pedestrians(self) -> int:
+        return self.config.pedestrians.count
+
+    # ----- episode start ----------------------------------------------------------------
+    def reset(self, random: np.random.RandomState, lane: Lane, along: float) -> dict[str, Any]:
+        """The starting traffic around a robot at ``along`` on ``lane``: one draw from the
+        task's generator ``random``, the rest from the episode's traffic seed."""
+        seed = int(random.randint(2**31 - 1))
+        rng = np.random.default_rng(seed)
+        vehicles = self.config.vehicles
+        ahead = [advance(self.map, lane, along, d) for d in self._distances(rng, vehicles.ahead)]
+        opposite = [opposite_position(self.map, *advance(self.map, lane, along, d))
+                    for d in self._distances(rng, vehicles.opposite)]
+        speeds = rng.uniform(*vehicles.speed, size=vehicles.count)
+        pedestrians = [[int(rng.integers(2)), 0.0, *self._crossing_draws(rng)]
+                       for _ in range(self.pedestrians)]
+        return {"seed": seed,
+                "vehicles": [[self._lane_index[v_lane], v_along, float(speed)]
+                             for (v_lane, v_along), speed in zip(ahead + opposite, speeds,
+                                                                 strict=True)],
+                "pedestrians": pedestrians}
+
+    def _distances(self, rng: np.random.Generator, count: int) -> list[float]:
+        """``count`` start distances (m) in ``vehicles.distance``, at least
+        :data:`START_SPACING` apart: sorted draws from the range shortened by the spacings,
+        the k-th pushed k spacings on (uniform over the allowed placements)."""
+        low, high = self.config.vehicles.distance
+        slack = high - (count - 1) * START_SPACING  # >= low: checked with the task file
+        draws = sorted(rng.uniform(low, max(slack, low), size=count).tolist())
+        return [d + k * START_SPACING for k, d in enumerate(draws)]
+
+    def _crossing_draws(self, rng: np.random.Generator) -> list[float | int]:
+        """[speed (m/s), wait (control steps), crossings done (0)] of a pedestrian's next
+        crossing."""
+        p = self.config.pedestrians
+        speed = float(rng.uniform(*p.speed))
+        wait = round(float(rng.uniform(*p.wait)) / self.dt)
+        return [speed, wait, 0]
+
+    # ----- stepping ---------------------------------------------------------------------
+    def step(self, state: dict[str, Any], robot: Pose) -> None:
+        """Move every mover one control step, with the robot at ``robot`` (axle pose)."""
+        robot_box = duckiebot_box(*robot)
+        robot_points = footprint_points(robot_box, 3)
+        boxes = self.boxes(state)
+        vehicle_boxes = boxes[:self.vehicles]
+        pedestrian_points = [p for box in boxes[self.vehicles:] for p in footprint_points(box, 3)]
+        for k, vehicle in enumerate(state["vehicles"]):
+            others = [p for j, box in enumerate(vehicle_boxes) if j != k
+                      for p in footprint_points(box, 3)]
+            lane = self.map.lanes[vehicle[0]]
+            speed = self._vehicle_speed(lane, vehicle[1], vehicle[2],
+                                        robot_points + others + pedestrian_points)
+            lane, vehicle[1] = advance(self.map, lane, vehicle[1], speed * self.dt)
+            vehicle[0] = self._lane_index[lane]
+            vehicle_boxes[k] = duckiebot_box(*lane.point_at(vehicle[1]))
+        for k, pedestrian in enumerate(state["pedestrians"]):
+            self._walk(state["seed"], k, pedestrian, [robot_box, *vehicle_boxes])
+
+    def _vehicle_speed(self, lane: Lane, along: float, cruise: float,
+                       points: list[tuple[float, float]]) -> float:
+        """Speed (m/s) of a vehicle at ``along`` on ``lane`` for this step."""
+        speed = cruise
+        if lane.curvature:
+            speed = min(speed, math.sqrt(_MAX_LATERAL_ACCELERATION / abs(lane.curvature)))
+        ahead = distance_ahead(self.map, lane, along, points,
+                               C.FOOTPRINT_WIDTH / 2 + CORRIDOR_MARGIN, LOOKAHEAD)
+        if ahead is not None:
+            speed = min(speed, max(ahead - FRONT - FOLLOW_GAP, 0.0) / FOLLOW_TIME)
+        return speed
+
+    def _walk(self, seed: int, k: int, pedestrian: list, duckiebots: list[MapObject]) -> None:
+        """One step of pedestrian ``k``: wait, or walk on unless that would bring it within
+        :data:`YIELD_GAP` of a Duckiebot; at the far side, draw the next crossing."""
+        side, walked, speed, wait, done = pedestrian
+        if wait > 0:
+            pedestrian[3] = wait - 1
+            return
+        crossing_k = self.crossings[k]
+        walked = min(walked + speed * self.dt, crossing_k.length)
+        box = pedestrian_box(*crossing_k.point_at(walked, side))
+        if any(footprint_gap(box, other) < YIELD_GAP for other in duckiebots):
+            return
+        if walked < crossing_k.length:
+            pedestrian[1] = walked
+            return
+        rng = np.random.default_rng([seed, k, done + 1])
+        pedestrian[:] = [1 - side, 0.0, *self._crossing_draws(rng)[:2], done + 1]
+
+    # ----- poses and measures -----------------------------------------------------------
+    def poses(self, state: dict[str, Any]) -> list[Pose]:
+        """(x, y, yaw) of every mover: the vehicles' axles, then the pedestrians."""
+        vehicles = [self.map.lanes[lane].point_at(along) for lane, along, _ in state["vehicles"]]
+        pedestrians = [self.crossings[k].point_at(walked, side)
+                       for k, (side, walked, *_rest) in enumerate(state["pedestrians"])]
+        return vehicles + pedestrians
+
+    def boxes(self, state: dict[str, Any]) -> list[MapObject]:
+        """Every mover's footprint box (with its height), in :meth:`poses`' order."""
+        poses = self.poses(state)
+        return ([duckiebot_box(*pose) for pose in poses[:self.vehicles]]
+                + [pedestrian_box(*pose) for pose in poses[self.vehicles:]])
+
+    def headway(self, state: dict[str, Any], lane: Lane, along: float) -> float | None:
+        """Gap (m) from the front of a robot at ``along`` on ``lane`` to the nearest vehicle
+        whose footprint reaches into that lane ahead (within :data:`LOOKAHEAD` or the headway
+        bound, whichever is longer), or None."""
+        points = [p for box in self.boxes(state)[:self.vehicles] for p in footprint_points(box, 3)]
+        ahead = distance_ahead(self.map, lane, along, points, LANE_HALF_WIDTH,
+                               max(LOOKAHEAD, self.config.headway) + FRONT)
+        return None if ahead is None else ahead - FRONT
+
+
+def duckiebot_box(x: float, y: float, yaw: float) -> MapObject:
+    """The collision footprint of a Duckiebot whose axle is at (x, y, yaw)."""
+    back = C.FOOTPRINT_CENTRE_BEHIND_AXLE
+    return MapObject("duckiebot", x - back * math.cos(yaw), y - back * math.sin(yaw), yaw,
+                     C.FOOTPRINT_LENGTH, C.FOOTPRINT_WIDTH, VEHICLE_HEIGHT)
+
+
+def pedestrian_box(x: float, y: float, yaw: float) -> MapObject:
+    """The footprint of a pedestrian at (x, y, yaw)."""
+    length, width, height = PEDESTRIAN_SIZE
+    return MapObject("duckie", x, y, yaw, length, width, height)
+
+
+__all__ = ["FOLLOW_GAP", "FRONT", "ROADSIDE", "Traffic", "duckiebot_box", "pedestrian_box"]
