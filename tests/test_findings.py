@@ -105,6 +105,27 @@ def test_in_short_s_training_aids_quote_the_runs(where):
     assert f"even the privileged teacher spends {teacher['J_clane']:.2f} dm there" in readme
 
 
+@pytest.mark.parametrize("where", ["README.md", "index.md"])
+def test_in_short_quotes_what_the_other_aids_buy(where):
+    """The encounter spawns' and the state critics' lines are the aids experiment's test
+    evaluations (``results/pixels/aids.json``)."""
+    variants = json.loads((REPO / "results/pixels/aids.json").read_text())["maps"][
+        "obstacle_loop"]
+
+    def sampled(name: str) -> str:
+        return " and ".join(f"{v:.2f}" for v in variants[name]["J_coll"]["values"])
+
+    def worst_mode(name: str) -> str:
+        return f"{max(variants[name]['mode']['J_coll']['values']):.2f}"
+
+    text = " ".join(prose(where).split())
+    assert (f"(J_coll {sampled('no encounter spawns')} without encounter spawns, "
+            f"{sampled('pixel critics')} with pixel critics, against {sampled('default')} "
+            "with both)") in text
+    assert (f"(at worst {worst_mode('no encounter spawns')} and {worst_mode('pixel critics')} "
+            f"per episode, against {worst_mode('default')})") in text
+
+
 def test_the_annealed_small_loop_runs_are_quoted_as_they_ended():
     text = " ".join(FINDINGS.split())
     root = REPO / "results/runs/pixels/small_loop"
