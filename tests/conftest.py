@@ -48,3 +48,21 @@ def tiny_experiments(tmp_path_factory):
                 completed.stdout[-3000:] + completed.stderr[-3000:]
             stdout.write_text(completed.stdout)
     return runs / "pixels", results / "pixels", stdout.read_text()
+
+
+@pytest.fixture
+def load_task():
+    """``crllk.load`` with its keyword arguments; the renderers of every environment built are
+    released after the test."""
+    import crllk
+
+    built = []
+
+    def make(task, **kwargs):
+        env = crllk.load(task, **kwargs)
+        built.append(env)
+        return env
+
+    yield make
+    for env in built:
+        env.physics.free_renderers()

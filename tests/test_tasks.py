@@ -28,19 +28,13 @@ DISCRETE_STRAIGHT = 2
 
 
 @pytest.fixture
-def make_env():
+def make_env(load_task):
     """Build fresh environments; their renderers are released after the test."""
-    built = []
-
     def make(task, observation="state", action="discrete", seed=0, overrides=SHORT):
-        env = crllk.load(task, observation=observation, action=action, seed=seed,
+        return load_task(task, observation=observation, action=action, seed=seed,
                          overrides=overrides)
-        built.append(env)
-        return env
 
-    yield make
-    for env in built:
-        env.physics.free_renderers()
+    return make
 
 
 def test_every_paper_task_is_registered():

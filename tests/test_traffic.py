@@ -12,7 +12,6 @@ import pytest
 import torch
 from tiny_runs import assert_same_runs, read_rows, run_in_process
 
-import crllk
 from crllk.analysis.recording_picture import series
 from crllk.envs.batched import make_env
 from crllk.errors import ConfigError
@@ -33,19 +32,13 @@ FORWARD = np.array([0.5, 0.5])
 
 
 @pytest.fixture
-def load():
+def load(load_task):
     """``crllk.load`` with wheel duties as actions; renderers released after the test."""
-    built = []
-
     def make(task, seed=0, observation="state", overrides=None):
-        env = crllk.load(task, observation=observation, action="duty", seed=seed,
+        return load_task(task, observation=observation, action="duty", seed=seed,
                          overrides=overrides)
-        built.append(env)
-        return env
 
-    yield make
-    for env in built:
-        env.physics.free_renderers()
+    return make
 
 
 def mover_poses(env) -> list[tuple[float, float, float]]:
