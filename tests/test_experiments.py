@@ -583,12 +583,7 @@ def test_realmaps_at_a_tiny_budget(tmp_path):
     from crllk.experiments.realmaps import REALMAPS, realmaps_markdown
 
     tiny = [a for a in TINY_EXPERIMENT if not a.startswith("task.")]
-    completed = subprocess.run(
-        [sys.executable, "-m", "crllk.experiments", "realmaps", *tiny,
-         "--runs-root", str(tmp_path / "runs"), "--results", str(tmp_path / "results")],
-        cwd=REPO, capture_output=True, text=True, timeout=600)
-    assert completed.returncode == 0, completed.stdout[-2000:] + completed.stderr[-2000:]
-    results = tmp_path / "results" / "pixels"
+    results = _run_tiny_experiment("realmaps", tiny, tmp_path)
     document = json.loads((results / "realmaps.json").read_text())
     assert list(document["maps"]) == list(REALMAPS)
     assert all("mode" in entry for entry in document["maps"].values())
@@ -596,3 +591,78 @@ def test_realmaps_at_a_tiny_budget(tmp_path):
     run = tmp_path / "runs" / "pixels" / "regress_4way_adam" / "CRLLK-D-a0.5-seed0"
     assert "regress_4way_adam.yaml" in (run / "config.yaml").read_text()
     assert read_eval_json(run, TEST_EVALUATION)["evaluation"]["seed"] == TEST_SEED
+
+
+def _run_tiny_experiment(name: str, arguments: list[str], tmp_path: Path) -> Path:
+    """Runs ``python -m crllk.experiments <name>`` into ``tmp_path``; its results folder."""
+    completed = subprocess.run(
+        [sys.executable, "-m", "crllk.experiments", name, *arguments,
+         "--runs-root", str(tmp_path / "runs"), "--results", str(tmp_path / "results")],
+        cwd=REPO, capture_output=True, text=True, timeout=600)
+    assert completed.returncode == 0, completed.stdout[-2000:] + completed.stderr[-2000:]
+    return tmp_path / "results" / "pixels"
+
+
+@pytest.mark.slow
+def test_traffic_at_a_tiny_budget(tmp_path):
+    """``experiments traffic`` end to end: its agents trained from pixels on both traffic
+    tasks, tested on the test seed with the community's metrics, the Markdown rebuilt from the
+    JSON."""
+    from crllk.experiments.traffic import TRAFFIC_AGENTS, TRAFFIC_TASKS, traffic_markdown
+
+    results = _run_tiny_experiment("traffic", TINY_EXPERIMENT, tmp_path)
+    document = json.loads((results / "traffic.json").read_text())
+    assert list(document["tasks"]) == list(TRAFFIC_TASKS)
+    for task, block in document["tasks"].items():
+        assert list(block["agents"]) == list(TRAFFIC_AGENTS)
+        for entry in block["agents"].values():
+            assert "mode" in entry and entry["community"][0]["episodes"] == 2
+        assert list(block["teacher"]) == ["discrete", "continuous"]
+        assert block["teacher"]["discrete"]["community"][0]["episodes"] == 2
+        metrics = [c["metric"] for c in block["agents"]["CRLLK-D"]["constraints"]]
+        assert ("J_chead" in metrics) == (task == "traffic_loop")
+    text = (results / "traffic.md").read_text()
+    assert text == traffic_markdown(document)
+    assert "| CRLLK-D | sampled | 0 |" in text and "| PPO-D | mode | 0 |" in text
+    assert "| teacher | continuous | — |" in text
+
+
+def test_traffic_markdown_worked_example():
+    """Every cell of a traffic table row from a hand-made document: the constraint with its
+    interval and excess, the community medians, collisions by kind and multipliers."""
+    from crllk.experiments.traffic import traffic_markdown
+
+    constraints = [{"name": "lane", "metric": "J_clane", "unit": "dm"},
+                   {"name": "collision", "metric": "J_coll", "unit": "per episode"},
+                   {"name": "headway", "metric": "J_chead", "unit": "fraction of steps"}]
+    entry = {"runs": ["r/traffic_loop/CRLLK-D-a0.5-seed1"], "constraints": constraints,
+             "J_clane": {"values": [0.31]}, "J_coll": {"values": [0.05]},
+             "J_chead": {"values": [0.02]}, "J_R": {"values": [4.5]},
+             "intervals": {"J_clane": [[0.3, 0.32]], "J_coll": [[0.03, 0.08]],
+                           "J_chead": [[0.01, 0.03]]},
+             "community": [{"episodes": 400,
+                            "survival_time_s": {"median": 17.07, "mean": 15.0},
+                            "distance_tiles": {"median": 6.4, "mean": 6.0},
+                            "lateral_deviation_m": {"median": 0.031, "mean": 0.03},
+                            "outside_lane_s": {"median": 0.0, "mean": 0.2},
+                            "collisions_by_kind": {"vehicle": 20}}],
+             "multipliers": [{"lane": 0.0, "collision": 12.5, "headway": 0.5}]}
+    document = {"title": "Lane keeping with traffic (pixels)",
+                "settings": {"obs": "pixels", "frames": 500000, "episodes": 400,
+                             "eval_seed": TEST_SEED, "machine": "2 cores",
+                             "command": "python -m crllk.experiments traffic"},
+                "trained": 0, "evaluated": 0, "wall_s": 1.0,
+                "tasks": {"traffic_loop": {"about": "vehicles", "agents": {"CRLLK-D": entry},
+                                           "thresholds": {"lane": 0.5, "collision": 0.02,
+                                                          "headway": 0.05},
+                                           "teacher": {"discrete": {
+                                               **entry, "runs": ["teacher-seed0"],
+                                               "multipliers": [{}]}}}}}
+    text = traffic_markdown(document)
+    assert "Constraints: J_clane ≤ 0.5 dm, J_coll ≤ 0.02 per episode, J_chead ≤ 0.05" in text
+    assert ("| CRLLK-D | sampled | 1 | 0.310 (0.300–0.320) ✓ | 0.050 (0.030–0.080) ✗ +0.030 "
+            "| 0.020 (0.010–0.030) ✓ | 4.50 | 17.1 | 6.40 | 0.031 | 0.00 | vehicle 20 "
+            "| lane 0.00, collision 12.50, headway 0.50 |") in text
+    assert ("| teacher | discrete | — | 0.310 (0.300–0.320) ✓ | 0.050 (0.030–0.080) ✗ +0.030 "
+            "| 0.020 (0.010–0.030) ✓ | 4.50 | 17.1 | 6.40 | 0.031 | 0.00 | vehicle 20 | — |") \
+        in text

@@ -118,6 +118,9 @@ def test_evaluation_in_two_workers_plays_the_same_episodes(tmp_path):
     assert one.directions == two.directions and None not in one.directions
     assert one.hit_objects == two.hit_objects and one.terminations == two.terminations
     assert one.hit_movers == two.hit_movers == [None] * 4
+    assert one.lateral_deviations == two.lateral_deviations  # the lane pose crosses too
+    assert one.outside_lane_steps == two.outside_lane_steps
+    assert None not in one.lateral_deviations
     for a, b in zip(one.actions, two.actions, strict=True):
         np.testing.assert_array_equal(a, b)
 

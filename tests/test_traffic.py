@@ -393,10 +393,10 @@ def test_a_stopped_traffic_run_resumes_exactly(tmp_path):
 
 
 def test_evaluation_names_the_mover_each_collision_hit():
-    """The follower (blind to movers) runs into the vehicle ahead: the evaluation's episodes
+    """The follower blind to movers runs into the vehicle ahead: the evaluation's episodes
     and breakdown name that mover."""
     env = make_env("traffic_loop", observation="state", action="duty", seed=3)
-    result = run_episodes(env, FollowerPolicy(env), 1)
+    result = run_episodes(env, FollowerPolicy(env, avoid_movers=False), 1)
     env.close()
     assert result.terminations == ["collision"]
     assert result.hit_movers == [0] and result.hit_objects == [None]

@@ -94,7 +94,7 @@ class BatchedLaneKeepingEnv(EnvBase):
                  privileged_state: bool = False, teacher: bool = False,
                  teacher_margin: float = FollowerGains.avoid_margin,
                  commands: bool = False, history: int = 1, history_stride: int = 1,
-                 device: torch.device | str = "cpu"):
+                 lane_pose: bool = False, device: torch.device | str = "cpu"):
         if num_envs < 1:
             raise ValueError(f"num_envs must be at least 1, got {num_envs}")
         if observation not in OBSERVATIONS:
@@ -142,6 +142,9 @@ class BatchedLaneKeepingEnv(EnvBase):
         self.cost_keys = tuple(c.cost_key for c in config.constraints)
         """Reward-like keys of the per-step costs, next to ``"reward"``, in constraint order."""
         self.reports_encounters = config.spawn.encounters > 0
+        self.reports_lane_pose = lane_pose
+        """Whether observations carry ``"lane_lateral"`` and ``"in_lane"``, the lane pose the
+        community's metrics are measured from (:mod:`crllk.evaluation.community`)."""
         """Whether observations carry ``"encounter"``: the episode started in front of an
         obstacle (``spawn.encounters``), so that metrics can leave such episodes out."""
         self._make_specs()
@@ -177,6 +180,11 @@ class BatchedLaneKeepingEnv(EnvBase):
                                                device=self.device)
         if self.teachers:
             entries["teacher_action"] = self._action_spec_of(n)
+        if self.reports_lane_pose:
+            entries["lane_lateral"] = Unbounded(shape=(*n, 1), dtype=torch.float32,
+                                                device=self.device)
+            entries["in_lane"] = Categorical(2, shape=(*n, 1), dtype=torch.bool,
+                                             device=self.device)
         if self.reports_commands:
             entries["commands"] = Bounded(-1.0, 1.0, shape=self._commands.shape,
                                           dtype=torch.float32, device=self.device)
@@ -251,7 +259,7 @@ class BatchedLaneKeepingEnv(EnvBase):
         if self.reports_commands:
             self._commands[i] = [value for duty in task.command_history for value in duty]
         if self.teacher_active and self.teachers:
-            self._teacher_actions[i] = self.teachers[i].action(physics)
+            self._teacher_actions[i] = self.teachers[i].action(physics, task.movers)
         elif self.teachers:  # none left over while off: a resumed run sees what a straight one does
             self._teacher_actions[i] = 0
 
@@ -275,6 +283,11 @@ class BatchedLaneKeepingEnv(EnvBase):
             entries["encounter"] = torch.tensor([[task.encounter] for task in self.tasks])
         if self.teachers:
             entries["teacher_action"] = torch.from_numpy(self._teacher_actions.copy())
+        if self.reports_lane_pose:
+            outcomes = [task.outcome for task in self.tasks]
+            entries["lane_lateral"] = torch.tensor([[o.lateral] for o in outcomes],
+                                                   dtype=torch.float32)
+            entries["in_lane"] = torch.tensor([[o.in_lane] for o in outcomes])
         if self.reports_commands:
             entries["commands"] = torch.from_numpy(self._commands.copy())
         return entries
@@ -398,7 +411,8 @@ def make_env(task: str | Path, *, num_envs: int = 1, observation: str = "pixels"
              overrides: dict[str, Any] | None = None, privileged_state: bool = False,
              teacher: bool = False, teacher_margin: float = FollowerGains.avoid_margin,
              commands: bool = False, history: int = 1, history_stride: int = 1,
-             device: torch.device | str = "cpu") -> BatchedLaneKeepingEnv:
+             lane_pose: bool = False, device: torch.device | str = "cpu"
+             ) -> BatchedLaneKeepingEnv:
     """A TorchRL environment with ``num_envs`` lane-keeping simulations in one process.
 
     Args:
@@ -420,13 +434,17 @@ def make_env(task: str | Path, *, num_envs: int = 1, observation: str = "pixels"
         history: pixels only: ``"pixels"`` stacks this many recent camera images, newest
             first (uint8 ``[N, H, W, 3 * history]``), a memory of what went out of view.
         history_stride: control steps between the stacked images.
+        lane_pose: also return ``"lane_lateral"`` (float32 ``[N, 1]``, the signed offset (m)
+            from the lane centre after the step, positive right) and ``"in_lane"`` (bool
+            ``[N, 1]``: on the road, centre inside its own lane), for evaluations.
         device: where the returned tensors live (simulation runs on the CPU).
     """
     config = load_task_config(task, overrides)
     return BatchedLaneKeepingEnv(config, num_envs=num_envs, observation=observation,
                                  action=action, seed=seed, privileged_state=privileged_state,
                                  teacher=teacher, teacher_margin=teacher_margin, commands=commands,
-                                 history=history, history_stride=history_stride, device=device)
+                                 history=history, history_stride=history_stride,
+                                 lane_pose=lane_pose, device=device)
 
 
 __all__ = ["SNAPSHOT_ARRAYS", "TERMINATIONS", "BatchedLaneKeepingEnv", "MirroredTeacherFlag",

@@ -22,6 +22,7 @@ from torchrl.envs.utils import ExplorationType, set_exploration_type
 from crllk.config import algo_thresholds
 from crllk.envs.batched import make_env
 from crllk.errors import ConfigError
+from crllk.evaluation import community
 from crllk.evaluation.report import result_document
 from crllk.evaluation.runs import EVALUATION_ENVS, result_path
 from crllk.files import atomic_write_text, output_lock
@@ -88,7 +89,7 @@ def evaluate_peer(run_dir: str | Path, *, episodes: int, seed: int,
     thresholds = algo_thresholds()
     with output_lock(result_path(run_dir, name)):
         env = make_env(peer["task"], num_envs=num_envs, observation="state",
-                       action="continuous", seed=seed)
+                       action="continuous", seed=seed, lane_pose=True)
         try:
             size = int(env.observation_spec["state"].shape[-1])
             actor, _ = load_peer_actor(run_dir, size, int(env.action_spec.shape[-1]))
@@ -105,7 +106,7 @@ def evaluate_peer(run_dir: str | Path, *, episodes: int, seed: int,
                     "algo": f"{peer['library']}-{peer['algo']}", "action": "continuous",
                     "obs": "state", "train_seed": peer["seed"], "frames": peer["frames"],
                     "elapsed": peer.get("wall_s")},
-            objects=env.config.map.objects)
+            objects=env.config.map.objects, scales=community.Scales.of(env.config))
         atomic_write_text(result_path(run_dir, name), json.dumps(document, indent=1) + "\n")
     return document
 

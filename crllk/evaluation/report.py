@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 
 from crllk.envs.episodes import summarise
+from crllk.evaluation import community
 from crllk.evaluation.intervals import metric_interval
 from crllk.rl.rollout import EvaluationResult
 from crllk.tasks.actions import DISCRETE_NAMES
@@ -139,23 +140,31 @@ def breakdown(result: EvaluationResult, objects: Sequence[Any] = ()) -> dict[str
 
 def result_document(result: EvaluationResult, action: str, *, thresholds: dict[str, float],
                     settings: dict[str, Any], source: dict[str, Any],
-                    objects: Sequence[Any] = ()) -> dict[str, Any]:
+                    objects: Sequence[Any] = (),
+                    scales: community.Scales | None = None) -> dict[str, Any]:
     """The ``eval.json`` content of one evaluation (``objects``: the map's, named in the
-    breakdown of collisions)."""
+    breakdown of collisions); with ``scales``, the community's metrics too, per episode and
+    under ``"community"`` (:mod:`crllk.evaluation.community`)."""
     s = result.summary
     rows = episode_rows(result, action)
+    if scales is not None:
+        for row, extra in zip(rows, community.episode_metrics(result, scales, objects),
+                              strict=True):
+            row.update(extra)
     summary = {"J_R": s.J_R, **s.J, "episode_length": s.length,
                "satisfied": all(s.J[c.metric] <= thresholds[c.name]
                                 for c in result.constraints)}
     constraints = [{"name": c.name, "metric": c.metric, "unit": c.unit,
                     "aggregate": c.aggregate, "threshold": thresholds[c.name]}
                    for c in result.constraints]
-    return {"source": source, "evaluation": settings, "thresholds": thresholds,
-            "constraints": constraints,
-            "summary": summary, "action_histogram": action_histogram(result.actions, action),
-            "terminations": dict(Counter(row["termination"] for row in rows)),
-            "breakdown": breakdown(result, objects),
-            "episodes": rows}
+    document = {"source": source, "evaluation": settings, "thresholds": thresholds,
+                "constraints": constraints,
+                "summary": summary, "action_histogram": action_histogram(result.actions, action),
+                "terminations": dict(Counter(row["termination"] for row in rows)),
+                "breakdown": breakdown(result, objects)}
+    if scales is not None:
+        document["community"] = community.summary(rows)
+    return {**document, "episodes": rows}
 
 
 def aggregate(documents: Sequence[dict[str, Any]]) -> dict[str, Any]:
@@ -194,6 +203,8 @@ def format_summary(document: dict[str, Any]) -> str:
     if split.get("collisions_by_object"):
         text += "\n  ended on: " + ", ".join(f"{obstacle} ×{count}" for obstacle, count
                                             in split["collisions_by_object"].items())
+    if document.get("community"):
+        text += "\n  " + community.format_summary(document["community"])
     return text
 
 

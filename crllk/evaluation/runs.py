@@ -15,6 +15,7 @@ from crllk.config import TrainConfig, algo_thresholds
 from crllk.envs.batched import make_env
 from crllk.envs.parallel import LaneKeepingEnv
 from crllk.errors import ConfigError
+from crllk.evaluation import community
 from crllk.evaluation.report import result_document
 from crllk.files import atomic_write_text, output_lock
 from crllk.protocol import VALIDATION_SEED
@@ -145,7 +146,8 @@ def write_evaluation(run_dir: str | Path, config: TrainConfig, env: LaneKeepingE
                   for c in env.config.constraints}
     document = result_document(result, config.action.name, thresholds=thresholds,
                                settings=settings, source=source,
-                               objects=env.config.map.objects)
+                               objects=env.config.map.objects,
+                               scales=community.Scales.of(env.config))
     atomic_write_text(result_path(run_dir, name), json.dumps(document, indent=1) + "\n")
     return document
 
@@ -174,7 +176,7 @@ def evaluate_follower(task: str | Path, *, episodes: int, seed: int = VALIDATION
     action type it answers in (its wheel duties, or the nearest action of a policy's type, as
     the teacher answers during training). ``overrides`` change the task's settings."""
     env = make_env(task, num_envs=num_envs, observation="state", action=action, seed=seed,
-                   overrides=dict(overrides) if overrides else None)
+                   overrides=dict(overrides) if overrides else None, lane_pose=True)
     try:
         policy = FollowerPolicy(env, avoid_obstacles=avoid_obstacles, margin=margin)
         result = run_episodes(env, policy, episodes)
@@ -188,7 +190,7 @@ def evaluate_follower(task: str | Path, *, episodes: int, seed: int = VALIDATION
                   **({"task_overrides": dict(overrides)} if overrides else {})},
         source={"task": str(task), "algo": "teacher" if avoid_obstacles else "follower",
                 "action": action, "obs": "state"},
-        objects=objects)
+        objects=objects, scales=community.Scales.of(env.config))
 
 
 def record_run(run_dir: str | Path, *, episodes: int, seed: int | None = None,

@@ -9,6 +9,7 @@
     python -m crllk.experiments aids      # CRLLK-D without encounter spawns, pixel critics
     python -m crllk.experiments realmaps  # CRLLK-D on two real Duckietown maps nobody tuned on
     python -m crllk.experiments peers --obs state  # crllk's learners beside OmniSafe's
+    python -m crllk.experiments traffic   # CRLLK-D, PPO-D, CRLLK-C with vehicles and pedestrians
     python -m crllk.experiments all       # table1, maps and figure1
 
 Every experiment trains its runs as trainer multiruns (``python -m crllk.train -m
@@ -65,6 +66,7 @@ from crllk.experiments.runs import (
 from crllk.experiments.sweep import sweep, sweep_markdown, sweep_specs
 from crllk.experiments.tables import settings_dict, table_markdown, write_table
 from crllk.experiments.teacher import teacher
+from crllk.experiments.traffic import traffic
 from crllk.files import atomic_write_text, write_problem
 from crllk.training.compose import compose_config
 
@@ -117,7 +119,7 @@ def figure1(settings: Settings) -> list[Path]:
 
 EXPERIMENTS = {"table1": table1, "maps": maps, "figure1": figure1, "sweep": sweep,
                "robustness": robustness, "teacher": teacher, "aids": aids,
-               "realmaps": realmaps, "peers": peers}
+               "realmaps": realmaps, "peers": peers, "traffic": traffic}
 ALL = ("table1", "maps", "figure1")
 """What ``all`` runs (the sweep is asked for by name)."""
 

@@ -4,7 +4,8 @@ A position on the road network is a lane and a distance along it from the lane's
 Vehicles move by :func:`advance`, which follows :meth:`DuckietownMap.next_lane` (straight on at
 intersections) and stops at the end of an open road. :func:`distance_ahead` measures, in the
 lane frame, how far ahead along a route the nearest of some points lies within a band about
-the lane centre (what a vehicle keeps its distance to, and the robot's headway).
+the lane centre (what a vehicle keeps its distance to, and the robot's headway); a :class:`Route`
+measures single points against the lanes ahead.
 A :class:`Crossing` is a straight walk across a straight road tile through its centre.
 """
 
@@ -12,6 +13,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 from crllk.maps.lanes import Lane
 from crllk.maps.road import DuckietownMap
@@ -54,31 +56,61 @@ def opposite_position(dmap: DuckietownMap, lane: Lane, along: float) -> tuple[La
     return other, min(max(other.project(x, y).along, 0.0), other.length)
 
 
+class RoutePoint(NamedTuple):
+    """A point measured against a :class:`Route`."""
+
+    distance: float
+    """Distance (m) along the lanes from the route's start to the point's projection."""
+    lateral: float
+    """Offset (m) from the centre of the route's lane on the point's tile, positive right."""
+    heading: float
+    """Heading (rad) of that lane at the projection."""
+
+
+class Route:
+    """The lanes ahead of ``along`` on ``lane`` (following :meth:`DuckietownMap.next_lane`) up
+    to ``reach`` (m), one per tile: the first lane the route takes through each tile."""
+
+    def __init__(self, dmap: DuckietownMap, lane: Lane, along: float, reach: float) -> None:
+        self.map = dmap
+        self.reach = reach
+        self._on_tile: dict[tuple[int, int], tuple[Lane, float]] = {}
+        """The route's lane on each tile and the distance (m) from the start to its entry."""
+        offset, current = -along, lane
+        while current is not None and offset <= reach:
+            self._on_tile.setdefault((current.column, current.row), (current, offset))
+            offset += current.length
+            current = dmap.next_lane(current)
+            if current is lane:
+                break
+
+    def project(self, x: float, y: float) -> RoutePoint | None:
+        """The point (x, y) against the route's lane on its tile; None off the route's tiles
+        or outside 0 to ``reach`` (m) along it."""
+        found = self._on_tile.get(self.map.tile_index(x, y))
+        if found is None:
+            return None
+        lane, start = found
+        projection = lane.project(x, y)
+        distance = start + projection.along
+        if not 0.0 <= distance <= self.reach:
+            return None
+        return RoutePoint(distance, projection.lateral, projection.heading)
+
+
 def distance_ahead(dmap: DuckietownMap, lane: Lane, along: float,
                    points: list[tuple[float, float]], half_width: float,
                    reach: float) -> float | None:
     """Distance (m) along the lanes from ``along`` on ``lane`` to the nearest of ``points``
     ahead that lies within ``half_width`` (m) of the lane centre, up to ``reach`` (m); None
     when there is none. Each point is measured against the route's lane on its tile."""
-    on_tile: dict[tuple[int, int], tuple[Lane, float]] = {}
-    offset, current = -along, lane
-    while current is not None and offset <= reach:
-        on_tile.setdefault((current.column, current.row), (current, offset))
-        offset += current.length
-        current = dmap.next_lane(current)
-        if current is lane:
-            break
+    route = Route(dmap, lane, along, reach)
     nearest = None
     for x, y in points:
-        found = on_tile.get(dmap.tile_index(x, y))
-        if found is None:
-            continue
-        route_lane, start = found
-        projection = route_lane.project(x, y)
-        distance = start + projection.along
-        if abs(projection.lateral) <= half_width and 0.0 <= distance <= reach \
-                and (nearest is None or distance < nearest):
-            nearest = distance
+        point = route.project(x, y)
+        if point is not None and abs(point.lateral) <= half_width \
+                and (nearest is None or point.distance < nearest):
+            nearest = point.distance
     return nearest
 
 
@@ -127,5 +159,5 @@ def crossing(dmap: DuckietownMap, column: int, row: int, reach: float) -> Crossi
     return Crossing(column, row, centre, dmap.tile_lanes(column, row)[0].start_heading, reach)
 
 
-__all__ = ["LANE_HALF_WIDTH", "Crossing", "advance", "crossing", "distance_ahead",
-           "opposite_lane", "opposite_position"]
+__all__ = ["LANE_HALF_WIDTH", "Crossing", "Route", "RoutePoint", "advance", "crossing",
+           "distance_ahead", "opposite_lane", "opposite_position"]

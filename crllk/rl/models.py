@@ -96,6 +96,9 @@ STATE_FEATURE_SCALES = {  # typical magnitude of each state feature, by name pre
     "curvature": 2.5,  # 1/m
     "obstacle_distance": 1.5,  # m
     "obstacle_lateral": 0.1,  # m
+    "mover_distance": 1.5,  # m
+    "mover_lateral": 0.1,  # m
+    "mover_speed": 0.2,  # m/s
     "duty": 0.5,  # duty cycle
 }
 

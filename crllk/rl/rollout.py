@@ -30,7 +30,9 @@ class EvaluationResult:
     """Finished episodes in episode order, their summary and the actions taken per episode;
     ``directions`` the loop direction each started in (``"intended"``, ``"reverse"`` or None)
     ``hit_objects`` the map object each ended on (an index, or None) and ``hit_movers`` the
-    moving agent (an index, vehicles then pedestrians, or None)."""
+    moving agent (an index, vehicles then pedestrians, or None); where the env reports the lane
+    pose, ``lateral_deviations`` each episode's mean |offset| from the lane centre (m) and
+    ``outside_lane_steps`` its steps ended outside its lane or off the road."""
 
     episodes: list[EpisodeStats]
     summary: Summary
@@ -40,6 +42,8 @@ class EvaluationResult:
     directions: list[str | None] = field(default_factory=list)
     hit_objects: list[int | None] = field(default_factory=list)
     hit_movers: list[int | None] = field(default_factory=list)
+    lateral_deviations: list[float | None] = field(default_factory=list)
+    outside_lane_steps: list[int | None] = field(default_factory=list)
 
 
 class Rollout:
@@ -105,6 +109,7 @@ def _run_episodes(env: LaneKeepingEnv, policy: Callable[[TensorDictBase], Tensor
     constraints = env.constraints
     accumulator = EpisodeAccumulator(num_envs, constraints)
     current_actions: list[list[np.ndarray]] = [[] for _ in range(num_envs)]
+    lateral_sums, outside_counts = np.zeros(num_envs), np.zeros(num_envs, dtype=np.int64)
     exploration = ExplorationType.DETERMINISTIC if deterministic else ExplorationType.RANDOM
 
     def finish_episodes(stepped: TensorDictBase) -> None:
@@ -113,6 +118,10 @@ def _run_episodes(env: LaneKeepingEnv, policy: Callable[[TensorDictBase], Tensor
         actions = stepped["action"].numpy()
         for i in range(num_envs):
             current_actions[i].append(actions[i].copy())
+        lane_pose = "lane_lateral" in nxt
+        if lane_pose:
+            lateral_sums[:] += nxt["lane_lateral"].reshape(num_envs).abs().double().numpy()
+            outside_counts[:] += ~nxt["in_lane"].reshape(num_envs).numpy()
         terminations = nxt["termination"].reshape(num_envs).tolist()
         for stats in accumulator.add_transition(nxt):
             i = stats.env_index
@@ -121,9 +130,12 @@ def _run_episodes(env: LaneKeepingEnv, policy: Callable[[TensorDictBase], Tensor
                                   np.stack(current_actions[i]),
                                   getattr(tasks[i], "start_direction", None),
                                   getattr(tasks[i], "hit_object", None),
-                                  getattr(tasks[i], "hit_mover", None)))
+                                  getattr(tasks[i], "hit_mover", None),
+                                  float(lateral_sums[i] / stats.length) if lane_pose else None,
+                                  int(outside_counts[i]) if lane_pose else None))
                 played[i] += 1
             current_actions[i] = []
+            lateral_sums[i], outside_counts[i] = 0.0, 0
 
     rollout = Rollout(env, policy)
     with set_exploration_type(exploration):
@@ -137,7 +149,9 @@ def _run_episodes(env: LaneKeepingEnv, policy: Callable[[TensorDictBase], Tensor
                             actions=[entry[2] for entry in ordered],
                             directions=[entry[3] for entry in ordered],
                             hit_objects=[entry[4] for entry in ordered],
-                            hit_movers=[entry[5] for entry in ordered])
+                            hit_movers=[entry[5] for entry in ordered],
+                            lateral_deviations=[entry[6] for entry in ordered],
+                            outside_lane_steps=[entry[7] for entry in ordered])
 
 
 __all__ = ["EvaluationResult", "Rollout", "collect", "episode_quotas", "run_episodes"]

@@ -32,6 +32,7 @@ from crllk.maps import DuckietownMap, LanePose, MapObject
 from crllk.maps.lanes import LANE_OFFSET
 from crllk.maps.markings import white_lateral
 from crllk.maps.obstacles import ObstacleIndex, footprint_points
+from crllk.maps.routes import LANE_HALF_WIDTH
 from crllk.sim import constants as C
 from crllk.sim.camera_effects import FrameEffects, add_noise, compress
 from crllk.sim.physics import Physics, check_points
@@ -39,6 +40,7 @@ from crllk.sim.variation import SceneVariation
 from crllk.tasks.actions import ACTIONS, action_duty
 from crllk.tasks.config import TaskConfig, load_task_config
 from crllk.tasks.constraints import Constraint
+from crllk.tasks.following import Mover
 from crllk.tasks.frames import robot_camera_image
 from crllk.tasks.randomization import distractor_count, draw_variation, max_delay
 from crllk.tasks.traffic import Traffic
@@ -52,6 +54,12 @@ OBSTACLE_RANGE = 1.5
 (OBSTACLE_RANGE, 0, 0)."""
 OBSTACLES_REPORTED = 2
 """Obstacles on the road ahead reported in the state features, nearest first."""
+MOVER_RANGE = 1.5
+"""Movers farther ahead along the lane than this (m) are not reported; an empty slot reads
+(MOVER_RANGE, 0, 0, 0)."""
+MOVERS_REPORTED = 2
+"""Movers reaching into the robot's lane ahead reported in the state features of a task with
+traffic, nearest first."""
 _BLOCKING_HALF_WIDTH = 0.1
 """An obstacle whose footprint comes this close (m) to a lane's centre line blocks the lane
 (the robot is 0.075 m half-wide): encounter spawns start in front of such obstacles."""
@@ -80,6 +88,12 @@ class StepOutcome:
     def cost(self, constraint: Constraint) -> float:
         """The step's cost of ``constraint``."""
         return self.signals[constraint.signal]
+
+    @property
+    def in_lane(self) -> bool:
+        """On the road with the robot's centre inside its own lane (the community's "in the
+        drivable lane")."""
+        return self.on_road and abs(self.lateral) <= LANE_HALF_WIDTH
 
 
 @dataclass
@@ -112,7 +126,8 @@ class EpisodeState:
 
 
 def state_feature_names(config: TaskConfig) -> list[str]:
-    """Names of the entries of the ``state`` observation, in order."""
+    """Names of the entries of the ``state`` observation, in order; with traffic they end in
+    the movers' slots (:meth:`LaneKeeping.mover_features`)."""
     names = ["lateral_offset", "heading_error_sin", "heading_error_cos", "forward_speed",
              "yaw_rate"]
     names += [f"curvature_{d:g}m" for d in _CURVATURE_LOOKAHEAD]
@@ -121,6 +136,10 @@ def state_feature_names(config: TaskConfig) -> list[str]:
                   f"obstacle_lateral_right_{k}"]
     for k in range(command_history_length(config)):
         names += [f"duty_left_t-{k}", f"duty_right_t-{k}"]
+    if config.traffic is not None:
+        for k in range(1, MOVERS_REPORTED + 1):
+            names += [f"mover_distance_{k}", f"mover_lateral_left_{k}",
+                      f"mover_lateral_right_{k}", f"mover_speed_{k}"]
     return names
 
 
@@ -376,6 +395,14 @@ class LaneKeeping(control.Task):
             return []
         return self.traffic.boxes(self.episode.traffic)
 
+    @property
+    def movers(self) -> list[Mover]:
+        """The moving agents' footprint boxes now and velocities over the last step (none
+        without traffic)."""
+        if self.traffic is None:
+            return []
+        return self.traffic.movers(self.episode.traffic)
+
     # ----- snapshots --------------------------------------------------------------------
     def episode_state(self) -> dict[str, Any]:
         """The whole :class:`EpisodeState` and the spawn generator's state, as plain Python
@@ -465,6 +492,23 @@ class LaneKeeping(control.Task):
                 out += [OBSTACLE_RANGE, 0.0, 0.0]
         return out
 
+    def mover_features(self, pose: LanePose) -> list[float]:
+        """For each of the :data:`MOVERS_REPORTED` nearest movers reaching into the lane ahead
+        (:meth:`crllk.tasks.traffic.Traffic.ahead`): distance (m) to its footprint, the lateral
+        offsets of its left and right edges from the lane centre (m, positive right) and its
+        speed along the lane over the last step (m/s); (MOVER_RANGE, 0, 0, 0) when there is
+        none."""
+        found = self.traffic.ahead(self.episode.traffic, pose.lane, pose.along, MOVERS_REPORTED,
+                                   MOVER_RANGE)
+        out: list[float] = []
+        for k in range(MOVERS_REPORTED):
+            if k < len(found):
+                mover = found[k]
+                out += [mover.distance, mover.lateral_left, mover.lateral_right, mover.speed]
+            else:
+                out += [MOVER_RANGE, 0.0, 0.0, 0.0]
+        return out
+
     def state_features(self, physics: Physics) -> np.ndarray:
         """The ``state`` observation; see :func:`state_feature_names`."""
         return np.array(self.state_feature_list(physics))
@@ -473,11 +517,14 @@ class LaneKeeping(control.Task):
         """:meth:`state_features` as a list of floats."""
         pose = self.lane_pose
         _x, _y, yaw = physics.pose()
-        return [pose.lateral, math.sin(pose.heading_error), math.cos(pose.heading_error),
-                physics.forward_speed(yaw), physics.yaw_rate(),
-                *self.map.curvature_ahead(pose, _CURVATURE_LOOKAHEAD),
-                *self.obstacle_features(pose),
-                *(value for duty in self.episode.history for value in duty)]
+        features = [pose.lateral, math.sin(pose.heading_error), math.cos(pose.heading_error),
+                    physics.forward_speed(yaw), physics.yaw_rate(),
+                    *self.map.curvature_ahead(pose, _CURVATURE_LOOKAHEAD),
+                    *self.obstacle_features(pose),
+                    *(value for duty in self.episode.history for value in duty)]
+        if self.traffic is not None:
+            features += self.mover_features(pose)
+        return features
 
 
 @functools.lru_cache(maxsize=16)

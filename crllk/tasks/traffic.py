@@ -4,20 +4,22 @@ headway to the vehicle ahead.
 Movers are kinematic (:mod:`crllk.sim.movers`). A vehicle rides the lane centre as the scripted
 lane follower aims to (:mod:`crllk.tasks.follower`): at its cruising speed, slower in curves
 (the follower's lateral acceleration limit) and slower still behind whatever is ahead in its
-lane, the robot included, stopping :data:`FOLLOW_GAP` short of it. A pedestrian stands at the
-roadside of its crossing, then walks across, waits and walks back. Movers yield: neither moves
-into the robot, so every collision is the robot's own doing.
+lane, the robot included, stopping :data:`~crllk.tasks.following.FOLLOW_GAP` short of it (the
+car following of :mod:`crllk.tasks.following`). A pedestrian stands at the roadside of its
+crossing, then walks across, waits and walks back. Movers yield: neither moves into the robot,
+so every collision is the robot's own doing.
 
 The traffic's state is plain values (:meth:`Traffic.reset` returns it, :meth:`Traffic.step`
-updates it in place) kept in the task's episode state, so snapshots hold it. Each episode
-takes one number from the task's generator, the episode's traffic seed; every draw of the
-episode (start distances, speeds, waits) comes from generators keyed by it, so a policy's
-behaviour never shifts the spawns of later episodes.
+updates it in place, the movers' velocities over the step included) kept in the task's episode
+state, so snapshots hold it. Each episode takes one number from the task's generator, the
+episode's traffic seed; every draw of the episode (start distances, speeds, waits) comes from
+generators keyed by it, so a policy's behaviour never shifts the spawns of later episodes.
 """
 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -27,6 +29,7 @@ from crllk.maps.objects import OBJECT_SIZES
 from crllk.maps.obstacles import footprint_gap, footprint_points
 from crllk.maps.routes import (
     LANE_HALF_WIDTH,
+    Route,
     advance,
     crossing,
     distance_ahead,
@@ -35,21 +38,18 @@ from crllk.maps.routes import (
 from crllk.sim import constants as C
 from crllk.sim.movers import PEDESTRIAN_SIZE
 from crllk.tasks.follower import FollowerGains
+from crllk.tasks.following import (
+    CORRIDOR_MARGIN,
+    FOLLOW_GAP,
+    FRONT,
+    LOOKAHEAD,
+    Mover,
+    following_speed,
+)
 from crllk.tasks.traffic_config import START_SPACING, TrafficConfig
 
 Pose = tuple[float, float, float]
 
-FRONT = C.FOOTPRINT_LENGTH / 2 - C.FOOTPRINT_CENTRE_BEHIND_AXLE
-"""Reach of a Duckiebot's footprint ahead of its axle (m)."""
-FOLLOW_GAP = 0.1
-"""Gap (m) a vehicle keeps, standing, behind what is ahead in its lane."""
-FOLLOW_TIME = 1.0
-"""Time (s) a vehicle takes to close the gap beyond FOLLOW_GAP: its speed is at most
-(gap - FOLLOW_GAP) / FOLLOW_TIME."""
-LOOKAHEAD = 1.0
-"""How far ahead (m) a vehicle looks for what is in its lane."""
-CORRIDOR_MARGIN = 0.03
-"""A vehicle slows for what comes within its half-width plus this (m) of its lane centre."""
 YIELD_GAP = 0.02
 """A pedestrian holds while its next step would bring it this close (m) to a Duckiebot."""
 ROADSIDE = 0.36
@@ -57,6 +57,19 @@ ROADSIDE = 0.36
 VEHICLE_HEIGHT = OBJECT_SIZES["duckiebot"][2]
 """Height (m) of a Duckiebot's box in recordings."""
 _MAX_LATERAL_ACCELERATION = FollowerGains.max_lateral_acceleration
+
+
+@dataclass(frozen=True)
+class MoverAhead:
+    """A mover whose footprint reaches into a lane ahead of a position: ``distance`` (m) along
+    the lanes to the nearest part of it in the lane, ``lateral_left`` and ``lateral_right`` (m)
+    the extent of its footprint across the lane, positive right, and ``speed`` (m/s) its
+    velocity over the last control step along the lane."""
+
+    distance: float
+    lateral_left: float
+    lateral_right: float
+    speed: float
 
 
 class Traffic:
@@ -95,7 +108,8 @@ class Traffic:
                 "vehicles": [[self._lane_index[v_lane], v_along, float(speed)]
                              for (v_lane, v_along), speed in zip(ahead + opposite, speeds,
                                                                  strict=True)],
-                "pedestrians": pedestrians}
+                "pedestrians": pedestrians,
+                "velocities": [[0.0, 0.0] for _ in range(self.vehicles + self.pedestrians)]}
 
     def _distances(self, rng: np.random.Generator, count: int) -> list[float]:
         """``count`` start distances (m) in ``vehicles.distance``, at least
@@ -116,10 +130,12 @@ class Traffic:
 
     # ----- stepping ---------------------------------------------------------------------
     def step(self, state: dict[str, Any], robot: Pose) -> None:
-        """Move every mover one control step, with the robot at ``robot`` (axle pose)."""
+        """Move every mover one control step, with the robot at ``robot`` (axle pose), and
+        keep their velocities (m/s, world frame) over the step in ``state["velocities"]``."""
         robot_box = duckiebot_box(*robot)
         robot_points = footprint_points(robot_box, 3)
-        boxes = self.boxes(state)
+        before = self.poses(state)
+        boxes = _boxes(before, self.vehicles)
         vehicle_boxes = boxes[:self.vehicles]
         pedestrian_points = [p for box in boxes[self.vehicles:] for p in footprint_points(box, 3)]
         for k, vehicle in enumerate(state["vehicles"]):
@@ -133,6 +149,9 @@ class Traffic:
             vehicle_boxes[k] = duckiebot_box(*lane.point_at(vehicle[1]))
         for k, pedestrian in enumerate(state["pedestrians"]):
             self._walk(state["seed"], k, pedestrian, [robot_box, *vehicle_boxes])
+        state["velocities"] = [[(x1 - x0) / self.dt, (y1 - y0) / self.dt]
+                               for (x0, y0, _), (x1, y1, _) in zip(before, self.poses(state),
+                                                                   strict=True)]
 
     def _vehicle_speed(self, lane: Lane, along: float, cruise: float,
                        points: list[tuple[float, float]]) -> float:
@@ -143,7 +162,7 @@ class Traffic:
         ahead = distance_ahead(self.map, lane, along, points,
                                C.FOOTPRINT_WIDTH / 2 + CORRIDOR_MARGIN, LOOKAHEAD)
         if ahead is not None:
-            speed = min(speed, max(ahead - FRONT - FOLLOW_GAP, 0.0) / FOLLOW_TIME)
+            speed = min(speed, following_speed(ahead - FRONT, FOLLOW_GAP))
         return speed
 
     def _walk(self, seed: int, k: int, pedestrian: list, duckiebots: list[MapObject]) -> None:
@@ -174,9 +193,13 @@ class Traffic:
 
     def boxes(self, state: dict[str, Any]) -> list[MapObject]:
         """Every mover's footprint box (with its height), in :meth:`poses`' order."""
-        poses = self.poses(state)
-        return ([duckiebot_box(*pose) for pose in poses[:self.vehicles]]
-                + [pedestrian_box(*pose) for pose in poses[self.vehicles:]])
+        return _boxes(self.poses(state), self.vehicles)
+
+    def movers(self, state: dict[str, Any]) -> list[Mover]:
+        """Every mover's footprint box and velocity over the last step, in :meth:`poses`'
+        order."""
+        return [Mover(box, (vx, vy))
+                for box, (vx, vy) in zip(self.boxes(state), state["velocities"], strict=True)]
 
     def headway(self, state: dict[str, Any], lane: Lane, along: float) -> float | None:
         """Gap (m) from the front of a robot at ``along`` on ``lane`` to the nearest vehicle
@@ -186,6 +209,33 @@ class Traffic:
         ahead = distance_ahead(self.map, lane, along, points, LANE_HALF_WIDTH,
                                max(LOOKAHEAD, self.config.headway) + FRONT)
         return None if ahead is None else ahead - FRONT
+
+    def ahead(self, state: dict[str, Any], lane: Lane, along: float, count: int,
+              reach: float) -> list[MoverAhead]:
+        """Up to ``count`` movers whose footprint reaches into the lane (within
+        ``LANE_HALF_WIDTH`` of its centre) ahead of ``along`` on ``lane``, within ``reach`` (m)
+        along the lanes, nearest first. The extent across the lane is that of the footprint's
+        points on the route; the speed is along the lane where the mover is nearest."""
+        route = Route(self.map, lane, along, reach)
+        found = []
+        for box, (vx, vy) in self.movers(state):
+            points = [p for p in (route.project(x, y) for x, y in footprint_points(box))
+                      if p is not None]
+            inside = [p for p in points if abs(p.lateral) <= LANE_HALF_WIDTH]
+            if not inside:
+                continue
+            nearest = min(inside, key=lambda p: p.distance)
+            speed = vx * math.cos(nearest.heading) + vy * math.sin(nearest.heading)
+            found.append(MoverAhead(nearest.distance, min(p.lateral for p in points),
+                                    max(p.lateral for p in points), speed))
+        found.sort(key=lambda m: m.distance)
+        return found[:count]
+
+
+def _boxes(poses: list[Pose], vehicles: int) -> list[MapObject]:
+    """The footprint boxes of movers at ``poses``, the first ``vehicles`` of them vehicles."""
+    return ([duckiebot_box(*pose) for pose in poses[:vehicles]]
+            + [pedestrian_box(*pose) for pose in poses[vehicles:]])
 
 
 def duckiebot_box(x: float, y: float, yaw: float) -> MapObject:
@@ -201,4 +251,5 @@ def pedestrian_box(x: float, y: float, yaw: float) -> MapObject:
     return MapObject("duckie", x, y, yaw, length, width, height)
 
 
-__all__ = ["FOLLOW_GAP", "FRONT", "ROADSIDE", "Traffic", "duckiebot_box", "pedestrian_box"]
+__all__ = ["FOLLOW_GAP", "FRONT", "ROADSIDE", "MoverAhead", "Traffic", "duckiebot_box",
+           "pedestrian_box"]

@@ -23,7 +23,8 @@ from crllk.tasks.constraints import Constraint
 def build_env(config: TrainConfig, *, num_envs: int, seed: int,
               training: bool = False) -> BatchedLaneKeepingEnv:
     """The run's environment; the ``training`` one starts ``encounters`` of its episodes in
-    front of an obstacle, the others keep the task's own spawns."""
+    front of an obstacle, the others keep the task's own spawns and report the lane pose the
+    community's metrics need."""
     overrides = config.task_overrides()
     if training and config.encounters > 0:
         spawn = {**overrides.get("spawn", {}), "encounters": config.encounters}
@@ -36,7 +37,7 @@ def build_env(config: TrainConfig, *, num_envs: int, seed: int,
                     teacher=training and (config.teacher.coeff > 0 or config.teacher.final > 0),
                     teacher_margin=config.teacher.margin,
                     commands=config.model.policy_commands, history=config.obs.history,
-                    history_stride=config.obs.history_stride)
+                    history_stride=config.obs.history_stride, lane_pose=not training)
 
 
 def build_training_env(config: TrainConfig) -> TrainingEnv:
