@@ -66,9 +66,12 @@ pictures: $(STAMP)
 # the README's screenshots of the real rerun viewer, taken headless (about 3 minutes on 2 cores):
 # a follower recording on obstacle_loop at 9 s, and a short training run's live view at its end
 VIEWER_RECORDING := outputs/recordings/obstacle_loop_follower.rrd
+TRAFFIC_RECORDING := outputs/recordings/traffic_loop_follower.rrd
 viewer-pictures: $(STAMP)
 	$(PY) -m crllk.record --task obstacle_loop --episodes 3 --horizon 150 --seed 1 --out $(VIEWER_RECORDING)
 	$(PY) -m crllk.screenshots $(VIEWER_RECORDING) --out docs/images --prefix viewer_recording --times 9
+	$(PY) -m crllk.record --task traffic_loop --episodes 1 --horizon 240 --seed 3 --out $(TRAFFIC_RECORDING)
+	$(PY) -m crllk.screenshots $(TRAFFIC_RECORDING) --out docs/images --prefix viewer_traffic --times 2
 	$(PY) -m crllk.screenshots --out docs/images --prefix viewer_live_training --train \
 		task=obstacle_loop obs=state seed=0 total_frames=40960 record_every=10 eval.final=false
 

@@ -65,6 +65,24 @@ def test_bench_times_each_part_of_the_randomisation(capsys):
     assert lighting.light_tilt == preset.light_tilt and lighting.jpeg_quality is None
 
 
+def test_bench_times_traffic_against_the_same_task_without_movers(capsys):
+    """``--traffic``: the batched pixel env with the task's movers against the same task
+    without them (and without the headway constraint, which needs vehicles); refused in one
+    line for a task without traffic."""
+    from crllk.bench import cli as bench
+
+    assert bench.without_traffic("traffic_loop") == {"traffic": None,
+                                                     "constraints": ["lane", "collision"]}
+    bench.main(["--task", "traffic_loop", "--steps", "8", "--num-envs", "2", "--traffic"])
+    printed = capsys.readouterr().out
+    assert "make_env pixels without movers, num_envs=2" in printed
+    assert "make_env pixels with traffic, num_envs=2" in printed
+    with pytest.raises(SystemExit) as stop:
+        bench.main(["--steps", "8", "--traffic"])
+    assert stop.value.code == 2
+    assert "--traffic needs a task with traffic" in capsys.readouterr().err
+
+
 def test_bench_batched_and_training_figures(capsys, tmp_path):
     """The batched-environment and training figures, and the time to satisfy both constraints
     read from a run's eval.csv, at a tiny budget."""

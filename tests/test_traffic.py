@@ -402,3 +402,41 @@ def test_evaluation_names_the_mover_each_collision_hit():
     assert result.hit_movers == [0] and result.hit_objects == [None]
     assert episode_rows(result, "duty")[0]["hit_mover"] == 0
     assert breakdown(result)["collisions_by_mover"] == {"0": 1}
+
+
+def test_distance_ahead_leaves_out_only_points_that_cannot_count():
+    """The straight-line shortcut of ``distance_ahead`` gives what projecting every point gives,
+    on straights and curves, near and beyond the reach."""
+    from crllk.maps.routes import Route, distance_ahead
+    from crllk.tasks.config import load_task_config
+
+    dmap = load_task_config("traffic_loop").map
+    rng = np.random.default_rng(5)
+    for _ in range(300):
+        lane = dmap.lanes[int(rng.integers(len(dmap.lanes)))]
+        along = float(rng.uniform(0.0, lane.length))
+        x0, y0, _ = lane.point_at(along)
+        points = [(x0 + float(dx), y0 + float(dy)) for dx, dy in rng.uniform(-1.6, 1.6, (12, 2))]
+        half_width, reach = float(rng.uniform(0.05, 0.2)), float(rng.uniform(0.3, 1.2))
+        route = Route(dmap, lane, along, reach)
+        projected = [p for p in (route.project(x, y) for x, y in points)
+                     if p is not None and abs(p.lateral) <= half_width]
+        expected = min((p.distance for p in projected), default=None)
+        assert distance_ahead(dmap, lane, along, points, half_width, reach) == expected
+
+
+def test_scenes_with_movers_draw_curves_coarser_and_others_as_before():
+    """A scene with movers draws its curved surfaces with movers.SLICES x STACKS; a scene
+    without keeps MuJoCo's defaults, so its images are unchanged."""
+    import mujoco
+
+    from crllk.sim import movers
+    from crllk.tasks.config import load_task_config
+    from crllk.tasks.lane_keeping import physics_of
+
+    defaults = mujoco.MjSpec().compile().vis.quality
+    for task, expected in (("traffic_loop", (movers.SLICES, movers.STACKS)),
+                           ("pedestrian_loop", (movers.SLICES, movers.STACKS)),
+                           ("obstacle_loop", (defaults.numslices, defaults.numstacks))):
+        quality = physics_of(load_task_config(task)).model.vis.quality
+        assert (quality.numslices, quality.numstacks) == expected, task

@@ -1,7 +1,7 @@
 """Throughput benchmarks, each figure next to the bound it is measured against in the same run.
 
     python -m crllk.bench [--task small_loop] [--steps 3000] [--batched] [--training]
-                          [--randomize-parts] [--workers 1 2 [--obs pixels state]]
+                          [--randomize-parts] [--traffic] [--workers 1 2 [--obs pixels state]]
                           [--runs RUN_DIR ...]
 
 Bounds: a state-observation environment step should cost at most twice
@@ -10,7 +10,9 @@ the raw MuJoCo physics of one control step (ratio >= 0.5); a pixel environment s
 should reach 1,000 steps/s on 2 cores; with ``randomize=default`` pixel steps should keep 90 %
 of their rate without, for one environment and for the batched one (each pair timed in turns,
 in short chunks; each figure the median of its chunks', so that bursts of load from other
-processes hardly count). ``--workers 1 2`` times collection (policy in this process, simulations
+processes hardly count); ``--traffic`` times the batched pixel env of a task with traffic
+against the same task without its movers (target: 80 % of its rate).
+``--workers 1 2`` times collection (policy in this process, simulations
 in that many worker processes) and whole training iterations for each worker count, each
 against the first count's figure (no target: the ratio is the speed-up); with ``--overrides
 collector=ray`` the simulations and the policy run in that many remote collectors of a private
@@ -55,6 +57,8 @@ RANDOMIZED_PARTS = {
     "dynamics": ("max_speed", "yaw_rate", "wheel_distance", "time_constants", "delay", "trim"),
 }
 """The parts of ``randomize=default`` that ``--randomize-parts`` times one at a time."""
+TRAFFIC_TARGET = 0.8
+"""Moving agents may slow pixel steps by at most 20 %."""
 
 
 def main(argv: Sequence[str] | None = None) -> None:
@@ -80,6 +84,9 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser.add_argument("--randomize-parts", action="store_true",
                         help="time each part of randomize=default alone against the pixel env "
                              "without randomisation (where the randomisation cost goes)")
+    parser.add_argument("--traffic", action="store_true",
+                        help="time the batched pixel env of --task (one with traffic) against the "
+                             "same task without its movers, in turns")
     parser.add_argument("--runs", nargs="*", type=Path, default=[],
                         help="run directories whose eval.csv gives the time to satisfy both "
                              "constraints")
@@ -88,7 +95,10 @@ def main(argv: Sequence[str] | None = None) -> None:
         if not (run_dir / "eval.csv").is_file():
             fail(f"{run_dir}: --runs: no eval.csv (not a run directory, or no evaluation yet)")
     try:
-        load_task_config(args.task)
+        config = load_task_config(args.task)
+        if args.traffic and config.traffic is None:
+            raise ConfigError(args.task, "traffic", "--traffic needs a task with traffic "
+                              "(e.g. tasks/traffic_loop.yaml)")
         worker_configs = worker_bench_configs(args.task, args.workers, args.obs, args.overrides)
         training_configs = (training_bench_configs(args.task, args.overrides)
                             if args.training else [])
@@ -109,6 +119,8 @@ def main(argv: Sequence[str] | None = None) -> None:
         print_randomization_parts(args.task, args.steps)
     if args.batched:
         print_batched_figures(args.task, args.num_envs, args.steps, raw, render)
+    if args.traffic:
+        print_traffic_figures(args.task, args.num_envs, args.steps)
     if training_configs:
         from crllk.bench.training import training_rates
 
@@ -184,6 +196,30 @@ def print_batched_figures(task: str, num_envs: int, steps: int, raw: float,
     print_row(f"make_env pixels, num_envs={num_envs}", pixels, render, 0.6)
     print_row(f"make_env pixels, randomize=default, num_envs={num_envs}", randomized, pixels,
               RANDOMIZED_TARGET)
+
+
+def without_traffic(task: str) -> dict[str, Any]:
+    """Task settings that take a task's movers away, and the constraints that need them."""
+    config = load_task_config(task)
+    return {"traffic": None, "constraints": [c.name for c in config.constraints
+                                             if c.signal != "headway"]}
+
+
+def print_traffic_figures(task: str, num_envs: int, steps: int) -> None:
+    """The batched pixel env of ``task`` with its traffic against the same task without its
+    movers, timed in turns."""
+    from crllk.bench.envs import batched_stepper
+
+    batched_steps = max(1, steps // num_envs)
+    plain, traffic = (batched_stepper(task, "pixels", num_envs, overrides=overrides)
+                      for overrides in (without_traffic(task), None))
+    rates = interleaved_rates([plain[0], traffic[0]], batched_steps)
+    plain[1]()
+    traffic[1]()
+    bound = rates[0] * num_envs
+    print_row(f"make_env pixels without movers, num_envs={num_envs}", bound)
+    print_row(f"make_env pixels with traffic, num_envs={num_envs}", rates[1] * num_envs, bound,
+              TRAFFIC_TARGET)
 
 
 def worker_bench_configs(task: str, workers: Sequence[int], observations: Sequence[str],

@@ -103,10 +103,18 @@ def distance_ahead(dmap: DuckietownMap, lane: Lane, along: float,
                    reach: float) -> float | None:
     """Distance (m) along the lanes from ``along`` on ``lane`` to the nearest of ``points``
     ahead that lies within ``half_width`` (m) of the lane centre, up to ``reach`` (m); None
-    when there is none. Each point is measured against the route's lane on its tile."""
+    when there is none. Each point is measured against the route's lane on its tile.
+
+    A point farther than ``reach + half_width`` (m) in a straight line from the start cannot
+    count (the lanes' length to its projection is at least the straight line there), so it is
+    left out before it is projected: the same answer, sooner."""
     route = Route(dmap, lane, along, reach)
+    start_x, start_y, _ = lane.point_at(along)
+    limit = (reach + half_width) ** 2
     nearest = None
     for x, y in points:
+        if (x - start_x) ** 2 + (y - start_y) ** 2 > limit:
+            continue
         point = route.project(x, y)
         if point is not None and abs(point.lateral) <= half_width \
                 and (nearest is None or point.distance < nearest):

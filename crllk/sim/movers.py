@@ -28,6 +28,12 @@ PEDESTRIAN_HEIGHT = 0.08
 PEDESTRIAN_SIZE = tuple(v * PEDESTRIAN_HEIGHT / OBJECT_SIZES["duckie"][2]
                         for v in OBJECT_SIZES["duckie"])
 """A pedestrian's footprint length x width x height (m), the map's duckie scaled."""
+SLICES, STACKS = 12, 6
+"""How finely a scene with movers draws curved surfaces (MuJoCo's ``visual.quality``; its
+defaults are 28 and 16): the movers' spheres, ellipsoids and cylinders are most of what such a
+scene draws, and at the robot camera's 60×80 render the coarser ones are drawn about twice as
+fast and differ from the fine ones only along their outlines (scenes without movers keep the
+defaults, so their images are unchanged)."""
 _CHASSIS = "chassis"
 _MOVER_CONTYPE, _MOVER_CONAFFINITY = 0, 2
 """Movers touch only the robot's chassis footprint (contype 2), as obstacles do."""
@@ -44,7 +50,10 @@ def pedestrian_name(index: int) -> str:
 
 
 def add_movers(spec: mujoco.MjSpec, vehicles: int, pedestrians: int) -> None:
-    """Add ``vehicles`` Duckiebots and ``pedestrians`` duckies as mocap bodies to ``spec``."""
+    """Add ``vehicles`` Duckiebots and ``pedestrians`` duckies as mocap bodies to ``spec``,
+    whose curved surfaces are then drawn with :data:`SLICES` and :data:`STACKS`."""
+    if vehicles or pedestrians:
+        spec.visual.quality.numslices, spec.visual.quality.numstacks = SLICES, STACKS
     for index in range(vehicles):
         spec.attach(_vehicle_spec(), prefix=vehicle_name(index),
                     frame=spec.worldbody.add_frame())
@@ -127,5 +136,5 @@ def _count(model: mujoco.MjModel, prefix: str) -> int:
                 if name.startswith(prefix)})
 
 
-__all__ = ["PEDESTRIAN_HEIGHT", "PEDESTRIAN_SIZE", "Movers", "add_movers", "pedestrian_name",
-           "vehicle_name"]
+__all__ = ["PEDESTRIAN_HEIGHT", "PEDESTRIAN_SIZE", "SLICES", "STACKS", "Movers", "add_movers",
+           "pedestrian_name", "vehicle_name"]
