@@ -666,3 +666,16 @@ def test_traffic_markdown_worked_example():
     assert ("| teacher | discrete | — | 0.310 (0.300–0.320) ✓ | 0.050 (0.030–0.080) ✗ +0.030 "
             "| 0.020 (0.010–0.030) ✓ | 4.50 | 17.1 | 6.40 | 0.031 | 0.00 | vehicle 20 | — |") \
         in text
+
+
+def test_traffic_trains_its_agents_that_agents_keeps():
+    """``traffic``: CRLLK-D, PPO-D and CRLLK-C on both tasks and every seed by default;
+    ``--agents`` narrows them (PPO-C is not one of its agents)."""
+    from crllk.experiments.runs import Settings
+    from crllk.experiments.traffic import TRAFFIC_TASKS, traffic_specs
+
+    every = traffic_specs(Settings(seeds=(0, 1)))
+    assert len(every) == 3 * len(TRAFFIC_TASKS) * 2
+    assert {s.agent for s in every} == {"CRLLK-D", "PPO-D", "CRLLK-C"}
+    narrowed = traffic_specs(Settings(seeds=(0,), agents=("CRLLK-D", "PPO-C")))
+    assert [(s.agent, s.task) for s in narrowed] == [("CRLLK-D", t) for t in TRAFFIC_TASKS]

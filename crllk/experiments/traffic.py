@@ -45,11 +45,11 @@ COMMUNITY_UNITS = {"survival_time_s": ("survival", "s", 1), "distance_tiles": ("
 """Each community metric's label, unit and digits in the table."""
 
 
-def traffic_specs(settings: Settings, tasks: Sequence[str] = tuple(TRAFFIC_TASKS),
-                  agents: Sequence[str] = TRAFFIC_AGENTS) -> list[RunSpec]:
-    """Every agent on every task and seed."""
-    return [RunSpec(agent, task, seed) for task in tasks for agent in agents
-            for seed in settings.seeds]
+def traffic_specs(settings: Settings, tasks: Sequence[str] = tuple(TRAFFIC_TASKS)
+                  ) -> list[RunSpec]:
+    """Every agent of :data:`TRAFFIC_AGENTS` that ``--agents`` keeps on every task and seed."""
+    return [RunSpec(agent, task, seed) for task in tasks for agent in TRAFFIC_AGENTS
+            if agent in settings.agents for seed in settings.seeds]
 
 
 def traffic(settings: Settings) -> list[Path]:
