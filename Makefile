@@ -64,7 +64,8 @@ pictures: $(STAMP)
 	$(PY) -m crllk.pictures
 
 # the README's screenshots of the real rerun viewer, taken headless (about 3 minutes on 2 cores):
-# a follower recording on obstacle_loop at 9 s, and a short training run's live view at its end
+# a follower recording on obstacle_loop at 9 s, one on traffic_loop at 2 s, and a short training
+# run's live view at its end
 VIEWER_RECORDING := outputs/recordings/obstacle_loop_follower.rrd
 TRAFFIC_RECORDING := outputs/recordings/traffic_loop_follower.rrd
 viewer-pictures: $(STAMP)

@@ -4,6 +4,7 @@ writes them."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -16,23 +17,36 @@ from crllk.evaluation import community
 from crllk.evaluation.report import format_summary
 from crllk.evaluation.runs import evaluate_follower
 from crllk.maps import MapObject
-from crllk.maps.routes import LANE_HALF_WIDTH
+from crllk.maps.markings import lane_edges
 from crllk.rl.rollout import EvaluationResult
-from crllk.tasks.lane_keeping import StepOutcome
+from crllk.tasks.lane_keeping import load
 
 SCALES = community.Scales(control_timestep=1 / 30, tile_size=0.585, vehicles=2)
 
 
-def _outcome(lateral: float, on_road: bool = True) -> StepOutcome:
-    return StepOutcome(0.0, lateral, 0.0, on_road, 0.0, 0, {}, None)
+def test_the_lane_s_edges_are_its_tapes_inner_edges():
+    """21.75 cm between the yellow centre tape (2.4 cm wide, its middle 11.7 cm left of the
+    lane centre) and the white edge tape (4.8 cm wide, 1.5 cm inside the tile's edge) on a
+    58.5 cm tile."""
+    left, right = lane_edges(0.585)
+    assert left == pytest.approx(-0.105) and right == pytest.approx(0.1125)
 
 
-def test_in_lane_is_the_centre_inside_its_own_lane_on_the_road():
-    assert _outcome(0.0).in_lane
-    assert _outcome(-LANE_HALF_WIDTH).in_lane
-    assert not _outcome(LANE_HALF_WIDTH + 0.001).in_lane
-    assert not _outcome(-0.2).in_lane  # in the other lane
-    assert not _outcome(0.0, on_road=False).in_lane
+@pytest.mark.parametrize(("lateral", "on_road", "termination", "expected"), [
+    (0.0, True, None, True), (-0.104, True, None, True), (0.112, True, None, True),
+    (-0.106, True, None, False), (0.113, True, None, False), (-0.2, True, None, False),
+    (0.0, False, None, False), (0.1, True, "off_road", False), (0.0, True, "collision", True)])
+def test_in_lane_is_the_centre_between_the_lane_edges_on_the_road(lateral, on_road,
+                                                                  termination, expected):
+    """The step's outcome: on the road, not ended off it, the centre between the edges (the
+    other lane is outside; a step that ends off the road is outside wherever the centre is)."""
+    env = load("small_loop", observation="state", seed=0)
+    task = env.task
+    pose = dataclasses.replace(task.map.lane_pose(*task.map.lanes[0].point_at(0.1)),
+                               lateral=lateral, on_road=on_road)
+    outcome = task._outcome(0.0, pose, {}, termination)
+    assert outcome.in_lane is expected
+    env.physics.free_renderers()
 
 
 def test_the_evaluation_env_reports_the_lane_pose_and_training_envs_do_not():
@@ -113,3 +127,42 @@ def test_a_follower_evaluation_with_pedestrians_writes_the_community_metrics():
         float(np.median([r["survival_time_s"] for r in rows])))
     assert math.isfinite(summary["lateral_deviation_m"]["mean"])
     assert "community medians:" in format_summary(document)
+
+
+def test_each_episode_s_lane_pose_sums_are_its_own():
+    """Episodes of unequal lengths (driving straight on leaves the road at different times, and a
+    simulation plays on past its quota): each episode's mean |lateral| and steps outside the
+    lane are those of its own steps, counted here step by step from the same seeds."""
+    from crllk.rl.rollout import run_episodes
+
+    def straight_on(td):
+        td.set("action", torch.full((2,), 2, dtype=torch.int64))
+        return td
+
+    env = make_env("small_loop", num_envs=2, observation="state", seed=4, lane_pose=True)
+    try:
+        result = run_episodes(env, straight_on, 3)
+    finally:
+        env.close()
+    replay = make_env("small_loop", num_envs=2, observation="state", seed=4, lane_pose=True)
+    episodes: list[list[tuple[float, int]]] = [[], []]
+    current: list[list[tuple[float, bool]]] = [[], []]
+    td = replay.reset()
+    try:
+        while len(episodes[0]) < 2 or len(episodes[1]) < 1:
+            stepped, td = replay.step_and_maybe_reset(straight_on(td))
+            nxt = stepped["next"]
+            for i in range(2):
+                current[i].append((float(nxt["lane_lateral"][i, 0]), bool(nxt["in_lane"][i, 0])))
+                if nxt["done"][i]:
+                    steps = current[i]
+                    episodes[i].append((sum(abs(lat) for lat, _ in steps) / len(steps),
+                                        sum(not inside for _, inside in steps)))
+                    current[i] = []
+    finally:
+        replay.close()
+    expected = [episodes[0][0], episodes[1][0], episodes[0][1]]  # episode k in simulation k % 2
+    assert [stats.length for stats in result.episodes] != [result.episodes[0].length] * 3
+    assert result.lateral_deviations == pytest.approx([e[0] for e in expected], rel=1e-6)
+    assert result.outside_lane_steps == [e[1] for e in expected]
+    assert any(count > 0 for count in result.outside_lane_steps)

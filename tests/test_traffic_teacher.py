@@ -183,6 +183,26 @@ def test_a_pedestrian_holding_beside_the_robot_lets_it_pass(load):
     assert pedestrian[4] == 1  # it crossed
 
 
+def test_a_pedestrian_holding_diagonally_ahead_of_the_robot_lets_it_pass(load):
+    """The robot at rest with its front 2-3 cm short of a duckie walking in from its right:
+    the duckie holds diagonally ahead of its front corner, inside the path's margin but
+    outside the robot's width; the follower (which counts standing movers only within its
+    width) drives on past it without touching it, then the duckie crosses. With the margin for
+    standing movers too, each waited for the other for good."""
+    for gap in (0.024, 0.026, 0.028):
+        env = load("pedestrian_loop", seed=0)
+        env.reset()
+        line = env.task.traffic.crossings[0].centre[0]
+        crossing_scene(env, 1, 0.0, 0.15, line + 0.03 + gap + FRONT)
+        follower = follower_of(env)
+        start = env.physics.pose()[0]
+        pedestrian = env.task.episode.traffic["pedestrians"][0]
+        for _ in range(400):
+            assert not env.step(follower.duty(env.physics, env.task.movers)).last(), gap
+        assert start - env.physics.pose()[0] > 1.0, gap  # it drove on
+        assert pedestrian[4] >= 1, gap  # and the duckie crossed
+
+
 def test_without_movers_in_its_path_the_follower_is_unchanged(load):
     """No mover in its path, the follower's duties are those of the follower without movers
     and without a headway bound, bit for bit: on small_loop, and on traffic_loop with both
@@ -328,3 +348,18 @@ def test_restored_env_replays_the_mover_features(tmp_path):
     finally:
         for env in envs:
             env.close()
+
+
+def test_the_follower_keeps_the_headway_bound_only_where_it_is_constrained():
+    """5 cm beyond traffic.headway on traffic_loop, which constrains the headway; the plain
+    following gap on pedestrian_loop, whose traffic section has a headway setting but no
+    headway constraint, and on small_loop, which has no traffic."""
+    from crllk.tasks.config import load_task_config
+    from crllk.tasks.follower import task_headway
+    from crllk.tasks.following import FOLLOW_GAP
+
+    assert task_headway(load_task_config("traffic_loop")) == 0.3
+    assert task_headway(load_task_config("pedestrian_loop")) is None
+    assert task_headway(load_task_config("small_loop")) is None
+    config = load_task_config("pedestrian_loop")
+    assert LaneFollower(config.map, config.motor, headway=task_headway(config)).keep == FOLLOW_GAP

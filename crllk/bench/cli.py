@@ -210,16 +210,11 @@ def print_traffic_figures(task: str, num_envs: int, steps: int) -> None:
     movers, timed in turns."""
     from crllk.bench.envs import batched_stepper
 
-    batched_steps = max(1, steps // num_envs)
-    plain, traffic = (batched_stepper(task, "pixels", num_envs, overrides=overrides)
-                      for overrides in (without_traffic(task), None))
-    rates = interleaved_rates([plain[0], traffic[0]], batched_steps)
-    plain[1]()
-    traffic[1]()
-    bound = rates[0] * num_envs
-    print_row(f"make_env pixels without movers, num_envs={num_envs}", bound)
-    print_row(f"make_env pixels with traffic, num_envs={num_envs}", rates[1] * num_envs, bound,
-              TRAFFIC_TARGET)
+    traffic, plain = paired_rates(functools.partial(batched_stepper, task, "pixels", num_envs),
+                                  max(1, steps // num_envs), without_traffic(task))
+    print_row(f"make_env pixels without movers, num_envs={num_envs}", plain * num_envs)
+    print_row(f"make_env pixels with traffic, num_envs={num_envs}", traffic * num_envs,
+              plain * num_envs, TRAFFIC_TARGET)
 
 
 def worker_bench_configs(task: str, workers: Sequence[int], observations: Sequence[str],

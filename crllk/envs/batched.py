@@ -142,11 +142,11 @@ class BatchedLaneKeepingEnv(EnvBase):
         self.cost_keys = tuple(c.cost_key for c in config.constraints)
         """Reward-like keys of the per-step costs, next to ``"reward"``, in constraint order."""
         self.reports_encounters = config.spawn.encounters > 0
+        """Whether observations carry ``"encounter"``: the episode started in front of an
+        obstacle (``spawn.encounters``), so that metrics can leave such episodes out."""
         self.reports_lane_pose = lane_pose
         """Whether observations carry ``"lane_lateral"`` and ``"in_lane"``, the lane pose the
         community's metrics are measured from (:mod:`crllk.evaluation.community`)."""
-        """Whether observations carry ``"encounter"``: the episode started in front of an
-        obstacle (``spawn.encounters``), so that metrics can leave such episodes out."""
         self._make_specs()
         self._set_seed(seed)
 

@@ -20,8 +20,12 @@ from crllk.maps import MapObject
 from crllk.rl.rollout import EvaluationResult
 from crllk.tasks.config import TaskConfig
 
-METRICS = ("survival_time_s", "distance_tiles", "lateral_deviation_m", "outside_lane_s")
-"""Each episode's community metrics (row keys), in the leaderboards' order."""
+FORMATS = {"survival_time_s": ("survival", "s", 1), "distance_tiles": ("distance", "tiles", 2),
+           "lateral_deviation_m": ("lateral deviation", "m", 3),
+           "outside_lane_s": ("outside the lane", "s", 2)}
+"""Each episode's community metrics (row keys) in the leaderboards' order, with the label,
+unit and digits they are shown with."""
+METRICS = tuple(FORMATS)
 
 
 @dataclass(frozen=True)
@@ -77,17 +81,8 @@ def summary(rows: Sequence[dict[str, Any]]) -> dict[str, Any]:
 
 def format_summary(community: dict[str, Any]) -> str:
     """One line: the medians (the leaderboards' figures) and the collisions by kind."""
-    def median(metric: str, unit: str, digits: int) -> str | None:
-        entry = community.get(metric)
-        return None if entry is None else f"{entry['median']:.{digits}f} {unit}"
-
-    parts = [text for text in (
-        f"survival {median('survival_time_s', 's', 1)}",
-        f"distance {median('distance_tiles', 'tiles', 2)}",
-        None if community.get("lateral_deviation_m") is None
-        else f"lateral deviation {median('lateral_deviation_m', 'm', 3)}",
-        None if community.get("outside_lane_s") is None
-        else f"outside the lane {median('outside_lane_s', 's', 2)}") if text]
+    parts = [f"{label} {community[metric]['median']:.{digits}f} {unit}"
+             for metric, (label, unit, digits) in FORMATS.items() if community.get(metric)]
     kinds = community.get("collisions_by_kind") or {}
     hits = ", ".join(f"{kind} ×{count}" for kind, count in kinds.items()) or "none"
     return f"community medians: {', '.join(parts)}; collisions: {hits}"
@@ -106,4 +101,4 @@ def _at(values: Sequence[Any], k: int) -> Any:
     return values[k] if k < len(values) else None
 
 
-__all__ = ["METRICS", "Scales", "episode_metrics", "format_summary", "summary"]
+__all__ = ["FORMATS", "METRICS", "Scales", "episode_metrics", "format_summary", "summary"]

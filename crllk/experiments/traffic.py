@@ -6,9 +6,9 @@ and seed (sampled policy and deployed mode) with the paper's metrics, the commun
 (:mod:`crllk.evaluation.community`) and what each episode collided with, beside the final
 multipliers or weights.
 
-CRLLK-C is there because the paper's three discrete actions cannot stop: the slowest drives at
-0.18 m/s, faster than the vehicle ahead may (0.1–0.2 m/s), so behind a slow vehicle or before a
-crossing duckie the discrete agents can only weave or collide. The table shows it with the
+CRLLK-C is there because none of the paper's three discrete actions stops (each drives
+forward), so behind a slow vehicle or before a crossing duckie the discrete agents can only
+weave or collide. The table shows it with the
 scripted teacher (the lane follower that follows the traffic, :mod:`crllk.tasks.follower`)
 answering in each action type through the same test episodes: what imitation can teach.
 """
@@ -19,7 +19,7 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from crllk.evaluation.community import METRICS
+from crllk.evaluation.community import FORMATS, METRICS
 from crllk.evaluation.report import aggregate
 from crllk.evaluation.runs import evaluate_follower
 from crllk.experiments.runs import Outcome, RunSpec, Settings, train_and_evaluate
@@ -27,9 +27,9 @@ from crllk.experiments.seeds import SEED_OF_RUN
 from crllk.experiments.tables import invocation, invocation_note, settings_dict, write_documents
 
 TRAFFIC_TASKS = {
-    "traffic_loop": "other Duckiebots: one ahead in the robot's lane (0.1–0.2 m/s, slower than "
-                    "the robot may drive), one coming the other way; J_chead is the fraction "
-                    "of steps closer than 0.3 m behind the vehicle ahead",
+    "traffic_loop": "other Duckiebots: one ahead in the robot's lane, slower than the robot may "
+                    "drive, one coming the other way; J_chead is the fraction of steps closer "
+                    "than traffic.headway behind the vehicle ahead",
     "pedestrian_loop": "duckies crossing the road at three straight tiles, at random times and "
                        "speeds",
 }
@@ -39,10 +39,6 @@ TRAFFIC_AGENTS = ("CRLLK-D", "PPO-D", "CRLLK-C")
 multipliers with continuous actions, which can slow down behind traffic."""
 TEACHER_ACTIONS = ("discrete", "continuous")
 """The action types the scripted teacher answers in for the table's reference rows."""
-COMMUNITY_UNITS = {"survival_time_s": ("survival", "s", 1), "distance_tiles": ("distance",
-                   "tiles", 2), "lateral_deviation_m": ("lateral deviation", "m", 3),
-                   "outside_lane_s": ("outside the lane", "s", 2)}
-"""Each community metric's label, unit and digits in the table."""
 
 
 def traffic_specs(settings: Settings, tasks: Sequence[str] = tuple(TRAFFIC_TASKS)
@@ -57,7 +53,8 @@ def traffic(settings: Settings) -> list[Path]:
     ``traffic.md`` into ``<results>/<obs>/``."""
     outcome = train_and_evaluate(traffic_specs(settings), settings)
     teachers = {(task, action): evaluate_follower(task, episodes=settings.episodes,
-                                                  seed=settings.eval_seed, action=action)
+                                                  seed=settings.eval_seed, action=action,
+                                                  avoid_obstacles=True)
                 for task in TRAFFIC_TASKS for action in TEACHER_ACTIONS}
     document = traffic_document(outcome, settings, teachers)
     return write_documents(settings, "traffic", document, traffic_markdown(document))
@@ -130,7 +127,7 @@ def run_cells(entry: Mapping[str, Any], thresholds: Mapping[str, float]) -> list
         community = entry["community"][index] or {}
         for metric in METRICS:
             value = community.get(metric)
-            digits = COMMUNITY_UNITS[metric][2]
+            digits = FORMATS[metric][2]
             cells[metric] = "—" if value is None else f"{value['median']:.{digits}f}"
         kinds = community.get("collisions_by_kind") or {}
         cells["collisions"] = ", ".join(f"{kind} {count}" for kind, count in kinds.items()) \
@@ -170,7 +167,7 @@ def traffic_markdown(document: Mapping[str, Any]) -> str:
         bounds = ", ".join(f"{c['metric']} ≤ {thresholds[c['name']]:g} {c['unit']}"
                            for c in constraints)
         header = ["agent", "policy", "seed", *(c["metric"] for c in constraints), "J_R",
-                  *(f"{label} ({unit})" for label, unit, _ in COMMUNITY_UNITS.values()),
+                  *(f"{label} ({unit})" for label, unit, _ in FORMATS.values()),
                   "collisions", "multipliers"]
         lines += [f"## {task}", "", f"{block['about']}. Constraints: {bounds}.", "",
                   "| " + " | ".join(header) + " |", "|" + " --- |" * len(header)]

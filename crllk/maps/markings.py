@@ -51,6 +51,12 @@ def white_lateral(tile_size: float) -> float:
     return tile_size / 2 - WHITE_INNER - WHITE_WIDTH / 2 - LANE_OFFSET
 
 
+def lane_edges(tile_size: float) -> tuple[float, float]:
+    """Offsets (m, positive right) of the lane's two edges from its centre: the yellow centre
+    tape's inner edge on the left, the white edge tape's inner edge on the right."""
+    return -(LANE_OFFSET - YELLOW_WIDTH / 2), white_lateral(tile_size) - WHITE_WIDTH / 2
+
+
 def white_marking_strips(dmap: DuckietownMap) -> list[np.ndarray]:
     """White edge tape: right of every lane on straights and curves; along the closed side of
     intersections (right of the straight lanes whose right side has no opening)."""
@@ -80,5 +86,5 @@ def yellow_marking_strips(dmap: DuckietownMap) -> list[np.ndarray]:
     return strips
 
 
-__all__ = ["LANE_HEIGHT", "MARKING_HEIGHT", "lane_centre_strips", "lane_polyline",
+__all__ = ["LANE_HEIGHT", "MARKING_HEIGHT", "lane_centre_strips", "lane_edges", "lane_polyline",
            "white_lateral", "white_marking_strips", "yellow_marking_strips"]

@@ -73,9 +73,11 @@ class FollowerGains:
     headway_margin: float = 0.05
     """Gap kept beyond the task's headway bound behind a mover ahead (m)."""
     path_margin: float = 0.01
-    """Movers within the robot's half-width plus this (m) of its lateral offset are in its
-    path. Less than the gap a pedestrian keeps from a Duckiebot when it holds
-    (:data:`crllk.tasks.traffic.YIELD_GAP`): one holding beside the robot lets it pass."""
+    """Moving movers within the robot's half-width plus this (m) of its lateral offset are in
+    its path; standing ones only within its half-width. Less than the gap a pedestrian keeps
+    from a Duckiebot when it holds (:data:`crllk.tasks.traffic.YIELD_GAP`), and a holding
+    pedestrian stands: one holding beside the robot, or diagonally ahead of its front corner,
+    lets it pass (else each would wait for the other)."""
     mover_prediction: float = 1.0
     """Where a mover goes at its velocity within this time (s) counts as where it is."""
 
@@ -115,11 +117,13 @@ class LaneFollower:
         in its path (``path_margin``) ahead of that front along the lanes; None when none is
         within :data:`LOOKAHEAD`. What is beside the robot, behind its front, it passes."""
         route = Route(self.map, *advance(self.map, pose.lane, pose.along, FRONT), LOOKAHEAD)
-        reach = FOOTPRINT_WIDTH / 2 + self.gains.path_margin
         times = [self.gains.mover_prediction * k / _MOVER_STEPS for k in range(_MOVER_STEPS + 1)]
-        ahead = [p.distance for box, (vx, vy) in movers for x, y in footprint_points(box, 3)
-                 for t in times if (p := route.project(x + vx * t, y + vy * t)) is not None
-                 and abs(p.lateral - pose.lateral) <= reach]
+        ahead = []
+        for box, (vx, vy) in movers:
+            reach = FOOTPRINT_WIDTH / 2 + (self.gains.path_margin if vx or vy else 0.0)
+            ahead += [p.distance for x, y in footprint_points(box, 3) for t in times
+                      if (p := route.project(x + vx * t, y + vy * t)) is not None
+                      and abs(p.lateral - pose.lateral) <= reach]
         return following_speed(min(ahead), self.keep) if ahead else None
 
     def duty(self, physics: Physics, movers: Sequence[Mover] = ()) -> np.ndarray:
@@ -167,9 +171,11 @@ def _predict(x: float, y: float, yaw: float, speed: float, yaw_rate: float,
 
 
 def task_headway(config: TaskConfig) -> float | None:
-    """The headway bound (m) of a task with traffic, else None: what the follower keeps a
-    little more than behind a mover ahead."""
-    return None if config.traffic is None else config.traffic.headway
+    """The headway bound (m) of a task that constrains the headway, else None: what the
+    follower keeps a little more than behind a mover ahead."""
+    if config.traffic is None or not any(c.signal == "headway" for c in config.constraints):
+        return None
+    return config.traffic.headway
 
 
 class FollowerPolicy:

@@ -4,9 +4,10 @@ shared by the traffic's vehicles (:mod:`crllk.tasks.traffic`) and the scripted f
 
 A vehicle looks :data:`LOOKAHEAD` along its lane for anything within its half-width plus
 :data:`CORRIDOR_MARGIN` of the lane centre and drives no faster than closes the gap from its
-front down to the gap it keeps in :data:`FOLLOW_TIME` (:func:`following_speed`); the scripted
-follower looks along its own path the same way
-(:meth:`~crllk.tasks.follower.LaneFollower.mover_speed_limit`). A :class:`Mover` is what the
+front down to the gap it keeps in :data:`FOLLOW_TIME` (:func:`following_speed`). The scripted
+follower slows by the same rule for what is in its own path ahead, which it measures its own
+way (:meth:`~crllk.tasks.follower.LaneFollower.mover_speed_limit`: its width about its own
+offset, where the movers are and will be, and a gap of its own). A :class:`Mover` is what the
 follower sees of another agent.
 """
 

@@ -30,9 +30,8 @@ from dm_env import specs
 
 from crllk.maps import DuckietownMap, LanePose, MapObject
 from crllk.maps.lanes import LANE_OFFSET
-from crllk.maps.markings import white_lateral
+from crllk.maps.markings import lane_edges, white_lateral
 from crllk.maps.obstacles import ObstacleIndex, footprint_points
-from crllk.maps.routes import LANE_HALF_WIDTH
 from crllk.sim import constants as C
 from crllk.sim.camera_effects import FrameEffects, add_noise, compress
 from crllk.sim.physics import Physics, check_points
@@ -84,16 +83,13 @@ class StepOutcome:
     """Every per-step signal of :data:`~crllk.tasks.constraints.SIGNALS`, by name."""
     termination: str | None
     """None, or why the episode ended: 'off_road', 'collision' or 'unstable'."""
+    in_lane: bool = True
+    """On the road with the robot's centre between its lane's edges (the inner edges of the
+    yellow and the white tape): the community's "in the drivable lane"."""
 
     def cost(self, constraint: Constraint) -> float:
         """The step's cost of ``constraint``."""
         return self.signals[constraint.signal]
-
-    @property
-    def in_lane(self) -> bool:
-        """On the road with the robot's centre inside its own lane (the community's "in the
-        drivable lane")."""
-        return self.on_road and abs(self.lateral) <= LANE_HALF_WIDTH
 
 
 @dataclass
@@ -178,6 +174,7 @@ class LaneKeeping(control.Task):
         """Cells where randomised episodes scatter their distractor patches."""
         """The map's objects the robot collides with."""
         self._lane_lines = (-LANE_OFFSET, white_lateral(self.map.tile_size))
+        self._lane_edges = lane_edges(self.map.tile_size)
         """Lateral offsets (m) of the yellow centre line and the white edge line."""
         self.traffic = (None if config.traffic is None
                         else Traffic(config.traffic, self.map, config.control_timestep))
@@ -324,8 +321,11 @@ class LaneKeeping(control.Task):
 
     def _outcome(self, progress: float, pose: LanePose, signals: dict[str, float],
                  termination: str | None) -> StepOutcome:
+        left, right = self._lane_edges
+        in_lane = (pose.on_road and termination != "off_road"
+                   and left <= pose.lateral <= right)
         return StepOutcome(progress, pose.lateral, pose.heading_error, pose.on_road, pose.along,
-                           self._lane_index[id(pose.lane)], signals, termination)
+                           self._lane_index[id(pose.lane)], signals, termination, in_lane)
 
     def _crosses_line(self, before: StepOutcome, after: LanePose) -> bool:
         """Whether the robot's centre went from one side of a lane line to the other (both

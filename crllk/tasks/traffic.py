@@ -197,9 +197,10 @@ class Traffic:
 
     def movers(self, state: dict[str, Any]) -> list[Mover]:
         """Every mover's footprint box and velocity over the last step, in :meth:`poses`'
-        order."""
-        return [Mover(box, (vx, vy))
-                for box, (vx, vy) in zip(self.boxes(state), state["velocities"], strict=True)]
+        order (at rest on an episode's first step, and in a state kept without velocities)."""
+        boxes = self.boxes(state)
+        velocities = state.get("velocities") or [[0.0, 0.0]] * len(boxes)
+        return [Mover(box, (vx, vy)) for box, (vx, vy) in zip(boxes, velocities, strict=True)]
 
     def headway(self, state: dict[str, Any], lane: Lane, along: float) -> float | None:
         """Gap (m) from the front of a robot at ``along`` on ``lane`` to the nearest vehicle
