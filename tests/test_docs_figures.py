@@ -123,6 +123,9 @@ def test_the_readme_s_results_table_is_what_the_script_writes():
     readme = page("README.md")
     block = readme.split(module.START, 1)[1].split(module.END, 1)[0]
     assert block.strip() == module.results_table()
+    if module.PEERS.is_file():  # the peer comparison's paragraph, once it is committed
+        block = readme.split(module.PEERS_START, 1)[1].split(module.PEERS_END, 1)[0]
+        assert block.strip() == module.peers_summary()
 
 
 def test_every_results_file_named_exists():

@@ -100,3 +100,18 @@ def test_where_the_time_goes_is_the_committed_measurement():
     assert f"a state iteration takes {quoted('training, state, workers=2')})" in text
     state = rates["collection, state, workers=2"]
     assert f"{1024 / state:.2f} s of it collecting ({state:,.0f} frames/s)" in text
+
+
+def test_the_traffic_throughput_is_the_committed_measurement():
+    """The Benchmarks page's traffic ratios (the batched pixel env with movers against the same
+    task without them), from the committed bench output."""
+    ratios, task = {}, None
+    for line in (REPO / "results/bench/traffic.txt").read_text().splitlines():
+        if line.startswith("task "):
+            task = Path(line.split()[1].rstrip(",")).stem
+        elif line.startswith("make_env pixels with traffic"):
+            ratios[task] = float(line.split()[-3])
+    assert set(ratios) == {"traffic_loop", "pedestrian_loop"}
+    text = prose("benchmarks.md")
+    for task, ratio in ratios.items():
+        assert f"`{task}` {ratio:.2f}" in text

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import json
 import subprocess
+import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -104,9 +105,9 @@ def peer_frames(run_dir: Path) -> int:
         return 0
 
 
-def train_peers(runs: Sequence[tuple[str, str, int, Path]], settings: Settings) -> None:
+def train_peers(runs: Sequence[tuple[str, str, int, Path]], settings: Settings) -> int:
     """Trains the unfinished ``(algo, task, seed, run_dir)`` peer runs, ``jobs`` at a time, each
-    one's output in ``<run_dir>.log``."""
+    one's output in ``<run_dir>.log``; returns how many it trained."""
     if settings.frames % PEER_EPOCH_FRAMES:
         raise ConfigError(SOURCE, "--frames", f"peers: a whole number of OmniSafe epochs of "
                           f"{PEER_EPOCH_FRAMES:,} frames, got {settings.frames:,}")
@@ -118,7 +119,7 @@ def train_peers(runs: Sequence[tuple[str, str, int, Path]], settings: Settings) 
 
     def train(algo: str, task: str, seed: int, run_dir: Path) -> None:
         run_dir.parent.mkdir(parents=True, exist_ok=True)
-        with run_dir.with_suffix(".log").open("a") as log:
+        with run_dir.parent.joinpath(run_dir.name + ".log").open("a") as log:
             subprocess.run(peer_command(algo, task, seed, settings.frames, run_dir),
                            stdout=log, stderr=subprocess.STDOUT, check=False, cwd=SOURCE_ROOT)
 
@@ -127,6 +128,7 @@ def train_peers(runs: Sequence[tuple[str, str, int, Path]], settings: Settings) 
     if unfinished:
         raise RuntimeError("some peer runs did not finish (see their .log):\n"
                            + "\n".join(unfinished))
+    return len(todo)
 
 
 def evaluate_peers(run_dirs: Sequence[Path], settings: Settings) -> int:
@@ -221,6 +223,7 @@ def peers(settings: Settings) -> list[Path]:
     if settings.obs != "state":
         raise ConfigError(SOURCE, "--obs", "peers: the peer library's agents read state "
                           "features only: give --obs state")
+    started = time.perf_counter()
     root = settings.runs_root
     crllk_contenders = [contender for contender in CONTENDERS if not contender.peer]
     specs = [contender.spec(task, seed) for task in TASKS for contender in crllk_contenders
@@ -229,9 +232,11 @@ def peers(settings: Settings) -> list[Path]:
     peer_runs = [(contender.peer, task, seed, contender.directory(root, task, seed))
                  for task in TASKS for contender in CONTENDERS if contender.peer
                  for seed in settings.seeds]
-    train_peers(peer_runs, settings)
+    outcome.trained += train_peers(peer_runs, settings)
     outcome.evaluated += evaluate_peers([r[3] for r in peer_runs], settings)
+    outcome.wall_s = time.perf_counter() - started  # the peers' training and evaluation too
     document = peers_document(settings, outcome)
+    document["runs_total"] += len(peer_runs)
     return write_documents(settings, "peers", document, peers_markdown(document))
 
 
