@@ -10,8 +10,8 @@ import time
 from collections.abc import Sequence
 from pathlib import Path
 
-from crllk.analysis.pictures import DEFAULT_MAPS, picture_stem, write_pictures
-from crllk.cli import Parser, non_negative_int, positive_int, run
+from crllk.analysis.pictures import add_picture_arguments, picture_stem, write_pictures
+from crllk.cli import Parser, run
 from crllk.maps import load_map
 from crllk.sim.scene import export_scene
 from crllk.tasks.config import load_task_config
@@ -19,11 +19,7 @@ from crllk.tasks.config import load_task_config
 
 def main(argv: Sequence[str] | None = None) -> None:
     parser = Parser(description=__doc__.splitlines()[0])
-    parser.add_argument("--out", type=Path, default=Path("outputs/demo"))
-    parser.add_argument("--maps", nargs="+", default=list(DEFAULT_MAPS),
-                        help="task names or paths of task or map files")
-    parser.add_argument("--steps", type=positive_int, default=512)
-    parser.add_argument("--seed", type=non_negative_int, default=0)
+    add_picture_arguments(parser, Path("outputs/demo"))
     args = parser.parse_args(argv)
     for task in args.maps:
         load_task_config(task)  # a bad task or map file ends here, before any picture

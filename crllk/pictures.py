@@ -8,19 +8,15 @@ from __future__ import annotations
 from collections.abc import Sequence
 from pathlib import Path
 
-from crllk.analysis.pictures import DEFAULT_MAPS, picture_stem, write_pictures
-from crllk.cli import Parser, fail, non_negative_int, positive_int, run
+from crllk.analysis.pictures import add_picture_arguments, picture_stem, write_pictures
+from crllk.cli import Parser, fail, run
 from crllk.files import write_problem
 from crllk.tasks.config import load_task_config
 
 
 def main(argv: Sequence[str] | None = None) -> None:
     parser = Parser(description=__doc__.splitlines()[0])
-    parser.add_argument("--out", type=Path, default=Path("outputs/pictures"))
-    parser.add_argument("--maps", nargs="+", default=list(DEFAULT_MAPS),
-                        help="task names or paths of task or map files")
-    parser.add_argument("--steps", type=positive_int, default=512)
-    parser.add_argument("--seed", type=non_negative_int, default=0)
+    add_picture_arguments(parser, Path("outputs/pictures"))
     args = parser.parse_args(argv)
     problem = write_problem(args.out / "probe.png")
     if problem:

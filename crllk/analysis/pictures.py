@@ -3,6 +3,7 @@ camera at policy resolution and at full resolution, and a chase view."""
 
 from __future__ import annotations
 
+import argparse
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -10,12 +11,25 @@ import numpy as np
 from PIL import Image, ImageDraw
 
 import crllk
+from crllk.cli import non_negative_int, positive_int
 from crllk.maps import DuckietownMap
 from crllk.sim import constants as C
 from crllk.sim.physics import Physics
 from crllk.tasks.follower import LaneFollower
 
 DEFAULT_MAPS = ("small_loop", "zigzag", "obstacle_loop")
+
+
+def add_picture_arguments(parser: argparse.ArgumentParser, out: Path) -> None:
+    """The options of the commands that draw the maps: ``--out`` (default ``out``),
+    ``--maps``, ``--steps`` and ``--seed``."""
+    parser.add_argument("--out", type=Path, default=out)
+    parser.add_argument("--maps", nargs="+", default=list(DEFAULT_MAPS),
+                        help="task names or paths of task or map files")
+    parser.add_argument("--steps", type=positive_int, default=512)
+    parser.add_argument("--seed", type=non_negative_int, default=0)
+
+
 _TOPDOWN_SIZE = (600, 800)
 """(height, width) of top-down pictures (px)."""
 
