@@ -425,6 +425,40 @@ def test_distance_ahead_leaves_out_only_points_that_cannot_count():
         assert distance_ahead(dmap, lane, along, points, half_width, reach) == expected
 
 
+def test_outline_is_the_footprint_without_its_repeated_corners():
+    """The traffic measures a footprint by its centre, corners and edge midpoints: the points
+    of ``footprint_points(box, 3)``, each once."""
+    from crllk.maps.obstacles import footprint_points
+    from crllk.tasks.traffic import outline
+
+    box = duckiebot_box(0.3, 0.2, 0.7)
+    points = footprint_points(box, 3)
+    assert len(outline(box)) == 9 < len(points) == 13
+    assert set(outline(box)) == set(points)
+
+
+def test_headway_is_the_same_measured_afresh(load):
+    """The vehicles' outlines the last step measured serve the headway only while the
+    vehicles stand there: a fresh Traffic, before and after vehicle 0 moves, measures the same
+    gap."""
+    from crllk.tasks.traffic import Traffic
+
+    env = load("traffic_loop", seed=2)
+    env.reset()
+    _robot_behind_first_vehicle(env, 0.4)
+    env.step(STILL)
+    task = env.task
+    pose, state = task.lane_pose, task.episode.traffic
+    gaps = []
+    for shift in (0.0, -0.15):
+        state["vehicles"][0][1] += shift
+        fresh = Traffic(task.traffic.config, task.map, task.traffic.dt)
+        gaps.append(task.traffic.headway(state, pose.lane, pose.along))
+        assert gaps[-1] == fresh.headway(state, pose.lane, pose.along)
+    assert gaps[0] == pytest.approx(0.4, abs=0.01)
+    assert gaps[1] == pytest.approx(0.25, abs=0.01)
+
+
 def test_scenes_with_movers_draw_curves_coarser_and_others_as_before():
     """A scene with movers draws its curved surfaces with movers.SLICES x STACKS; a scene
     without keeps MuJoCo's defaults, so its images are unchanged."""

@@ -78,6 +78,21 @@ class Lane:
             heading=wrap_angle(angle + self.turn * math.pi / 2.0),
         )
 
+    def along_within(self, x: float, y: float, half_width: float) -> float | None:
+        """``project(x, y).along`` where the point lies within ``half_width`` (m) of the lane
+        centre, else None: the same numbers, without the heading, and without the angle for
+        points outside the band."""
+        cx, cy = self.centre
+        dx, dy = x - cx, y - cy
+        if self.turn == 0:
+            tx, ty = math.cos(self.start_heading), math.sin(self.start_heading)
+            if abs(dx * ty - dy * tx) > half_width:
+                return None
+            return dx * tx + dy * ty
+        if abs(self.turn * (math.hypot(dx, dy) - self.radius)) > half_width:
+            return None
+        return self.turn * wrap_angle(math.atan2(dy, dx) - self.start_angle) * self.radius
+
     def heading_at(self, x: float, y: float) -> float:
         """The lane's heading (rad) at the projection of (x, y): ``project(x, y).heading``."""
         if self.turn == 0:

@@ -82,6 +82,8 @@ class Traffic:
         self.crossings = [crossing(dmap, column, row, ROADSIDE)
                           for column, row in config.pedestrians.crossings]
         self._lane_index = {lane: k for k, lane in enumerate(dmap.lanes)}
+        self._outlines: tuple[tuple, list[list[tuple[float, float]]]] = ((), [])
+        """The vehicles' positions (lane index, along) and outlines last measured."""
 
     @property
     def vehicles(self) -> int:
@@ -133,20 +135,22 @@ class Traffic:
         """Move every mover one control step, with the robot at ``robot`` (axle pose), and
         keep their velocities (m/s, world frame) over the step in ``state["velocities"]``."""
         robot_box = duckiebot_box(*robot)
-        robot_points = footprint_points(robot_box, 3)
+        robot_points = outline(robot_box)
         before = self.poses(state)
         boxes = _boxes(before, self.vehicles)
         vehicle_boxes = boxes[:self.vehicles]
-        pedestrian_points = [p for box in boxes[self.vehicles:] for p in footprint_points(box, 3)]
+        vehicle_points = list(self._vehicle_outlines(state))
+        pedestrian_points = [p for box in boxes[self.vehicles:] for p in outline(box)]
         for k, vehicle in enumerate(state["vehicles"]):
-            others = [p for j, box in enumerate(vehicle_boxes) if j != k
-                      for p in footprint_points(box, 3)]
+            others = [p for j, points in enumerate(vehicle_points) if j != k for p in points]
             lane = self.map.lanes[vehicle[0]]
             speed = self._vehicle_speed(lane, vehicle[1], vehicle[2],
                                         robot_points + others + pedestrian_points)
             lane, vehicle[1] = advance(self.map, lane, vehicle[1], speed * self.dt)
             vehicle[0] = self._lane_index[lane]
             vehicle_boxes[k] = duckiebot_box(*lane.point_at(vehicle[1]))
+            vehicle_points[k] = outline(vehicle_boxes[k])
+        self._outlines = (_positions(state), vehicle_points)
         for k, pedestrian in enumerate(state["pedestrians"]):
             self._walk(state["seed"], k, pedestrian, [robot_box, *vehicle_boxes])
         state["velocities"] = [[(x1 - x0) / self.dt, (y1 - y0) / self.dt]
@@ -206,10 +210,20 @@ class Traffic:
         """Gap (m) from the front of a robot at ``along`` on ``lane`` to the nearest vehicle
         whose footprint reaches into that lane ahead (within :data:`LOOKAHEAD` or the headway
         bound, whichever is longer), or None."""
-        points = [p for box in self.boxes(state)[:self.vehicles] for p in footprint_points(box, 3)]
+        points = [p for vehicle in self._vehicle_outlines(state) for p in vehicle]
         ahead = distance_ahead(self.map, lane, along, points, LANE_HALF_WIDTH,
                                max(LOOKAHEAD, self.config.headway) + FRONT)
         return None if ahead is None else ahead - FRONT
+
+    def _vehicle_outlines(self, state: dict[str, Any]) -> list[list[tuple[float, float]]]:
+        """Each vehicle's :func:`outline` where ``state`` has it (the last :meth:`step`'s,
+        unless the vehicles stand elsewhere)."""
+        positions, outlines = self._outlines
+        if positions != _positions(state):
+            outlines = [outline(duckiebot_box(*self.map.lanes[lane].point_at(along)))
+                        for lane, along, _ in state["vehicles"]]
+            self._outlines = (_positions(state), outlines)
+        return outlines
 
     def ahead(self, state: dict[str, Any], lane: Lane, along: float, count: int,
               reach: float) -> list[MoverAhead]:
@@ -233,6 +247,17 @@ class Traffic:
         return found[:count]
 
 
+def outline(box: MapObject) -> list[tuple[float, float]]:
+    """The points (x, y) the traffic measures a footprint by: its centre, corners and edge
+    midpoints (``footprint_points(box, 3)`` without its repeated corners)."""
+    return list(dict.fromkeys(footprint_points(box, 3)))
+
+
+def _positions(state: dict[str, Any]) -> tuple[tuple[int, float], ...]:
+    """Where the vehicles of a traffic state are: (lane index, along) each."""
+    return tuple((lane, along) for lane, along, _ in state["vehicles"])
+
+
 def _boxes(poses: list[Pose], vehicles: int) -> list[MapObject]:
     """The footprint boxes of movers at ``poses``, the first ``vehicles`` of them vehicles."""
     return ([duckiebot_box(*pose) for pose in poses[:vehicles]]
@@ -252,5 +277,5 @@ def pedestrian_box(x: float, y: float, yaw: float) -> MapObject:
     return MapObject("duckie", x, y, yaw, length, width, height)
 
 
-__all__ = ["FOLLOW_GAP", "FRONT", "ROADSIDE", "MoverAhead", "Traffic", "duckiebot_box",
+__all__ = ["FOLLOW_GAP", "FRONT", "ROADSIDE", "MoverAhead", "Traffic", "duckiebot_box", "outline",
            "pedestrian_box"]
