@@ -304,6 +304,45 @@ def test_gae_helper_matches_a_manual_computation():
     torch.testing.assert_close(td["advantage_reward"][3:], torch.tensor([[1.1215], [0.6]]))
 
 
+def test_costs_discounted_by_their_own_gamma():
+    """cost_gamma = 0.99 discounts the costs and leaves the reward at γ = 0.95. Lane: V(s) = s,
+    λ = 1, so A_t = Σ_k γ_c^k c_{t+k} − V(s_t) (terminated at the last step):
+      A_3 = 2.0 + 0.99·1.0 − 0.4 = 2.59,   A_4 = 1.0 − 0.2 = 0.8;
+    reward: V(s) = 2s, r = 1: A_3 = 1 + 0.95·1 − 0.8 = 1.15, as at γ = 0.95 alone."""
+    critic = _fixed_linear_critic("state_value", slope=2.0)
+    cost_critics = {
+        "lane": _fixed_linear_critic("state_value_lane", slope=1.0),
+        "collision": _fixed_linear_critic("state_value_collision", slope=0.0),
+    }
+    td = make_advantage_modules(0.95, 1.0, critic, cost_critics, cost_gamma=0.99)(
+        _toy_trajectory())
+    torch.testing.assert_close(td["advantage_lane"][3:], torch.tensor([[2.59], [0.8]]))
+    torch.testing.assert_close(td["advantage_reward"][3:], torch.tensor([[1.15], [0.6]]))
+    # A_0 = 0.5 + 0.99·1.0 + 0.99²·0.0 + 0.99³·2.0 + 0.99⁴·1.0 − 1.0
+    first = 0.5 + 0.99 + 0.99**3 * 2.0 + 0.99**4 - 1.0
+    torch.testing.assert_close(td["advantage_lane"][0], torch.tensor([first]))
+    with pytest.raises(ValueError, match="cost_gamma"):
+        make_advantage_modules(0.95, 1.0, critic, cost_critics, cost_gamma=1.5)
+
+
+@pytest.mark.parametrize(("overrides", "tail"), [([], 10.0 * 0.95 / 0.05),
+                                                  (["ppo.cost_gamma=0.99"], 10.0 * 0.99 / 0.01)])
+def test_off_road_tail_is_discounted_as_the_costs_are(overrides, tail):
+    """With absorbing_off_road, a terminated step's lane cost gains the discounted sum of
+    off_road_lane_cost (10 dm) for ever after, at the costs' discount."""
+    from crllk.config import validate
+    from crllk.tasks.config import load_task_config
+    from crllk.training.compose import compose_config
+    from crllk.training.updates import shape_signals
+
+    config = validate(compose_config(["task=small_loop", "absorbing_off_road=true", *overrides]))
+    td = _toy_trajectory()
+    lane_before = td["next", "cost_lane"].clone()
+    shape_signals(td, config, load_task_config("small_loop"))
+    added = td["next", "cost_lane"] - lane_before
+    torch.testing.assert_close(added, torch.tensor([[0.0]] * 4 + [[tail]]))
+
+
 def test_gae_helper_feeds_the_loss_with_renamed_keys():
     actor, critic, cost_critics = _networks()
     loss = CriticsPPOLoss(actor, critic, cost_critics)

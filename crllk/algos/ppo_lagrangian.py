@@ -45,7 +45,7 @@ class PPOLagrangian:
                                    normalize_advantage=ppo.normalize_advantage)
         self.advantages: AdvantageModules = make_advantage_modules(
             ppo.gamma, ppo.gae_lambda, critics["reward"], {c: critics[c] for c in cost_names},
-            loss=self.loss)
+            loss=self.loss, cost_gamma=ppo.cost_gamma)
         self.combination = LagrangianAdvantage(cost_names)
         # foreach: the same updates bit for bit, in fewer kernel launches (pixel update ~6 %)
         self.optimizer = torch.optim.Adam(self.loss.parameters(), lr=ppo.lr, foreach=True)

@@ -58,6 +58,7 @@ def make_advantage_modules(
     *,
     loss: LossKeys | None = None,
     average_gae: bool = False,
+    cost_gamma: float | None = None,
 ) -> AdvantageModules:
     """GAE(γ, λ_GAE) for the reward and for each cost: the value targets the loss reads, and
     the advantages the λ-combination reads (:mod:`crllk.rl.lagrangian_advantage`: the reward's
@@ -68,6 +69,8 @@ def make_advantage_modules(
         δ_t = x_t + γ (1 − terminated_t) V(s_{t+1}) − V(s_t)
         A_t = δ_t + γ λ_GAE (1 − done_t) A_{t+1},      G_t = A_t + V(s_t)
 
+    with γ the costs' own discount ``cost_gamma`` for the costs where one is given.
+
     Args:
         gamma: Discount γ.
         lmbda: GAE λ.
@@ -76,9 +79,13 @@ def make_advantage_modules(
         loss: The loss the advantages are for (a :class:`~crllk.rl.loss.CriticsPPOLoss`), so
             that renamed keys agree (default: the loss's default keys).
         average_gae: Standardise each advantage (leave ``False`` to combine them unscaled).
+        cost_gamma: The costs' discount γ_c in place of γ (None: γ).
     """
-    if not (0.0 <= gamma <= 1.0 and 0.0 <= lmbda <= 1.0) or math.isnan(gamma + lmbda):
-        raise ValueError(f"gamma and lmbda must lie in [0, 1], got {gamma}, {lmbda}")
+    cost_gamma = gamma if cost_gamma is None else cost_gamma
+    if not all(0.0 <= x <= 1.0 for x in (gamma, lmbda, cost_gamma)) \
+            or math.isnan(gamma + lmbda + cost_gamma):
+        raise ValueError(f"gamma, cost_gamma and lmbda must lie in [0, 1], got {gamma}, "
+                         f"{cost_gamma}, {lmbda}")
     names = check_cost_names(tuple(cost_critics))
     reward = GAE(gamma=gamma, lmbda=lmbda, value_network=critic_network, average_gae=average_gae)
     keys = None if loss is None else loss.tensor_keys
@@ -95,7 +102,8 @@ def make_advantage_modules(
             target, value = f"value_target_{name}", critic.out_keys[0]
         else:
             target, value = loss.cost_keys(name)
-        module = GAE(gamma=gamma, lmbda=lmbda, value_network=critic, average_gae=average_gae)
+        module = GAE(gamma=cost_gamma, lmbda=lmbda, value_network=critic,
+                     average_gae=average_gae)
         module.set_keys(
             reward=cost_key(name), value=value, advantage=advantage, value_target=target
         )

@@ -18,13 +18,14 @@ def shape_signals(batch: TensorDictBase, config: TrainConfig, task: TaskConfig) 
     """The signals the learner sees, in place: the reward scaled by ``reward_scale``, and, with
     ``absorbing_off_road``, the lane-deviation cost of every later step of a terminated
     episode folded into its last step: the robot stays off the road at the task's
-    ``off_road_lane_cost`` (dm) per step for ever, γ·c_off / (1 − γ) in discounted sum.
+    ``off_road_lane_cost`` (dm) per step for ever, γ·c_off / (1 − γ) in discounted sum (γ
+    the costs' discount).
     Otherwise ending an episode early would cut its lane cost short and a large λ_lane would
     make leaving the road look cheap."""
     nxt = batch["next"]
     nxt["reward"] = nxt["reward"] * config.reward_scale
     if config.absorbing_off_road:
-        gamma = config.ppo.gamma
+        gamma = config.ppo.discount_of_costs()
         tail = task.off_road_lane_cost * gamma / (1.0 - gamma) if gamma < 1.0 else 0.0
         for constraint in task.constraints:
             if constraint.signal == "lane_deviation":
