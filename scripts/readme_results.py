@@ -8,8 +8,9 @@ Each cell of the table is the mean over training seeds of J_clane (dm) / J_coll 
 the sampled policy on the test seed, from ``results/pixels/table1.json``, ``table_zigzag.json``
 and ``table_obstacle_loop.json``, with how many seeds hold both constraints. The peer paragraph
 names, per map of ``results/state/peers.json``, the best constraint tracker and every learner
-that tracks the constraints more tightly than CRLLK-D. A test checks that the README holds
-exactly what this writes.
+that tracks the constraints more tightly than CRLLK-D; the traffic paragraph, per task of
+``results/pixels/traffic.json``, each agent's seeds that hold, its metrics, multipliers and
+collisions. A test checks that the README holds exactly what this writes.
 """
 
 from __future__ import annotations
@@ -24,6 +25,9 @@ TABLES = {"small_loop": "table1.json", "zigzag": "table_zigzag.json",
 START, END = "<!-- results-table -->", "<!-- /results-table -->"
 PEERS_START, PEERS_END = "<!-- peers-summary -->", "<!-- /peers-summary -->"
 PEERS = REPO / "results" / "state" / "peers.json"
+TRAFFIC_START, TRAFFIC_END = "<!-- traffic-summary -->", "<!-- /traffic-summary -->"
+TRAFFIC = REPO / "results" / "pixels" / "traffic.json"
+MULTIPLIER_NAMES = {"lane": "λ_lane", "collision": "λ_coll", "headway": "λ_head"}
 
 
 def results_table(results: Path = REPO / "results" / "pixels") -> str:
@@ -79,6 +83,58 @@ def peers_summary(path: Path = PEERS) -> str:
             "[Peer libraries](docs/results/peers.md)): " + "; ".join(sentences) + ".")
 
 
+def _span(values: list[float], digits: int) -> str:
+    """``low–high`` of ``values`` (one value alone)."""
+    low, high = min(values), max(values)
+    return f"{low:.{digits}f}" if f"{low:.{digits}f}" == f"{high:.{digits}f}" else \
+        f"{low:.{digits}f}–{high:.{digits}f}"
+
+
+def _held(entry: dict, thresholds: dict) -> int:
+    """How many of an agent's runs hold every constraint (point estimates)."""
+    return sum(all(entry[c["metric"]]["values"][k] <= thresholds[c["name"]]
+                   for c in entry["constraints"]) for k in range(len(entry["runs"])))
+
+
+def _agent_sentence(agent: str, entry: dict, thresholds: dict) -> str:
+    """An agent's seeds that hold, its metrics' spans over seeds, its multipliers (learned or
+    fixed) and what its test episodes collided with."""
+    runs = len(entry["runs"])
+    held = f"{_held(entry, thresholds)} of {runs} seeds hold every constraint"
+    if "mode" in entry:
+        held += f" ({_held(entry['mode'], thresholds)} of {runs} in the deployed mode)"
+    metrics = ", ".join(f"{c['metric']} {_span(entry[c['metric']]['values'], 3)}"
+                        for c in entry["constraints"])
+    names = [c["name"] for c in entry["constraints"] if c["name"] != "lane"]
+    kind = "fixed" if agent.startswith("PPO") else "learned"
+    weights = ", ".join(f"{MULTIPLIER_NAMES.get(n, n)} "
+                        f"{_span([m[n] for m in entry['multipliers'] if n in m], 1)}"
+                        for n in names if any(n in m for m in entry["multipliers"]))
+    kinds: dict[str, int] = {}
+    for community in entry["community"]:
+        for name, count in ((community or {}).get("collisions_by_kind") or {}).items():
+            kinds[name] = kinds.get(name, 0) + count
+    episodes = sum((c or {}).get("episodes", 0) for c in entry["community"])
+    hits = ", ".join(f"{name} {count}" for name, count in kinds.items()) or "nothing"
+    return (f"**{agent}** {held}, {metrics} ({kind} {weights}; its {episodes} sampled test "
+            f"episodes hit: {hits})")
+
+
+def traffic_summary(path: Path = TRAFFIC) -> str:
+    """One paragraph from the traffic experiment: per task and agent, the seeds that hold,
+    the metrics, the multipliers (learned or fixed) and what the collisions hit."""
+    document = json.loads(path.read_text())
+    settings = document["settings"]
+    sentences = []
+    for task, block in document["tasks"].items():
+        agents = "; ".join(_agent_sentence(agent, entry, block["thresholds"])
+                           for agent, entry in block["agents"].items())
+        sentences.append(f"on `{task}`, {agents}")
+    return (f"With traffic, from the camera ({settings['episodes']} test episodes per run, "
+            "[Traffic](docs/results/traffic.md)): "
+            + "; ".join(sentences) + ".")
+
+
 def _replace(text: str, start: str, end: str, block: str) -> str:
     head, rest = text.split(start, 1)
     tail = rest.split(end, 1)[1]
@@ -89,6 +145,8 @@ def write(readme: Path = REPO / "README.md") -> None:
     text = _replace(readme.read_text(), START, END, results_table())
     if PEERS.is_file():
         text = _replace(text, PEERS_START, PEERS_END, peers_summary())
+    if TRAFFIC.is_file() and TRAFFIC_START in text:
+        text = _replace(text, TRAFFIC_START, TRAFFIC_END, traffic_summary())
     readme.write_text(text)
 
 
@@ -99,3 +157,5 @@ if __name__ == "__main__":
         print(results_table())
         if PEERS.is_file():
             print(peers_summary())
+        if TRAFFIC.is_file():
+            print(traffic_summary())

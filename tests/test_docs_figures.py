@@ -126,6 +126,42 @@ def test_the_readme_s_results_table_is_what_the_script_writes():
     if module.PEERS.is_file():  # the peer comparison's paragraph, once it is committed
         block = readme.split(module.PEERS_START, 1)[1].split(module.PEERS_END, 1)[0]
         assert block.strip() == module.peers_summary()
+    if module.TRAFFIC.is_file():  # the traffic paragraph, once the experiment is committed
+        block = readme.split(module.TRAFFIC_START, 1)[1].split(module.TRAFFIC_END, 1)[0]
+        assert block.strip() == module.traffic_summary()
+
+
+def test_the_traffic_paragraph_worked_example(tmp_path):
+    """Each agent's seeds that hold, spans of its metrics, its multipliers and what it hit,
+    from a hand-made document (one seed holds, one misses J_coll)."""
+    spec = importlib.util.spec_from_file_location("readme_results",
+                                                  REPO / "scripts" / "readme_results.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    constraints = [{"name": "lane", "metric": "J_clane"},
+                   {"name": "collision", "metric": "J_coll"}]
+    entry = {"runs": ["CRLLK-D-a0.5-seed0", "CRLLK-D-a0.5-seed1"], "constraints": constraints,
+             "J_clane": {"values": [0.31, 0.27]}, "J_coll": {"values": [0.01, 0.05]},
+             "multipliers": [{"lane": 0.0, "collision": 12.54}, {"lane": 0.0, "collision": 20.0}],
+             "community": [{"episodes": 400, "collisions_by_kind": {"vehicle": 4}},
+                           {"episodes": 400, "collisions_by_kind": {"vehicle": 16,
+                                                                    "pedestrian": 4}}]}
+    entry["mode"] = {**entry, "J_coll": {"values": [0.0, 0.0]}}
+    fixed = {**entry, "runs": entry["runs"][:1], "J_clane": {"values": [0.2]},
+             "J_coll": {"values": [0.3]}, "multipliers": [{"lane": 1.0, "collision": 5.0}],
+             "community": [{"episodes": 400, "collisions_by_kind": {}}]}
+    del fixed["mode"]
+    path = tmp_path / "traffic.json"
+    path.write_text(json.dumps({"settings": {"episodes": 400}, "tasks": {"traffic_loop": {
+        "thresholds": {"lane": 0.5, "collision": 0.02},
+        "agents": {"CRLLK-D": entry, "PPO-D": fixed}}}}))
+    assert module.traffic_summary(path) == (
+        "With traffic, from the camera (400 test episodes per run, "
+        "[Traffic](docs/results/traffic.md)): on `traffic_loop`, **CRLLK-D** 1 of 2 seeds hold "
+        "every constraint (2 of 2 in the deployed mode), J_clane 0.270–0.310, J_coll "
+        "0.010–0.050 (learned λ_coll 12.5–20.0; its 800 sampled test episodes hit: vehicle 20, "
+        "pedestrian 4); **PPO-D** 0 of 1 seeds hold every constraint, J_clane 0.200, J_coll "
+        "0.300 (fixed λ_coll 5.0; its 400 sampled test episodes hit: nothing).")
 
 
 def test_every_results_file_named_exists():
