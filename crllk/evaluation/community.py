@@ -53,15 +53,15 @@ def episode_metrics(result: EvaluationResult, scales: Scales,
     and ``collided_with``: the kind of obstacle hit, ``"vehicle"``, ``"pedestrian"`` or None."""
     rows = []
     for k, stats in enumerate(result.episodes):
-        lateral = _at(result.lateral_deviations, k)
-        outside = _at(result.outside_lane_steps, k)
+        lateral = at_or_none(result.lateral_deviations, k)
+        outside = at_or_none(result.outside_lane_steps, k)
         rows.append({
             "survival_time_s": stats.length * scales.control_timestep,
             "distance_tiles": stats.distance / scales.tile_size,
             "lateral_deviation_m": lateral,
             "outside_lane_s": None if outside is None else outside * scales.control_timestep,
-            "collided_with": _collided_with(_at(result.hit_objects, k),
-                                            _at(result.hit_movers, k), scales, objects),
+            "collided_with": _collided_with(at_or_none(result.hit_objects, k),
+                                            at_or_none(result.hit_movers, k), scales, objects),
         })
     return rows
 
@@ -97,8 +97,10 @@ def _collided_with(hit_object: int | None, hit_mover: int | None, scales: Scales
     return None
 
 
-def _at(values: Sequence[Any], k: int) -> Any:
+def at_or_none(values: Sequence[Any], k: int) -> Any:
+    """``values[k]``, or None where the result keeps fewer (a per-episode field it lacks)."""
     return values[k] if k < len(values) else None
 
 
-__all__ = ["FORMATS", "METRICS", "Scales", "episode_metrics", "format_summary", "summary"]
+__all__ = ["FORMATS", "METRICS", "Scales", "at_or_none", "episode_metrics", "format_summary",
+           "summary"]

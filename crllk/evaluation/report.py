@@ -11,6 +11,7 @@ import numpy as np
 
 from crllk.envs.episodes import summarise
 from crllk.evaluation import community
+from crllk.evaluation.community import at_or_none
 from crllk.evaluation.intervals import metric_interval
 from crllk.rl.rollout import EvaluationResult
 from crllk.tasks.actions import DISCRETE_NAMES
@@ -100,18 +101,15 @@ def episode_rows(result: EvaluationResult, action: str) -> list[dict[str, Any]]:
             zip(result.episodes, result.terminations, result.actions, strict=True)):
         reason = termination or ("time_limit" if stats.truncated else None)
         row = {"episode": k, **stats.as_row(), "termination": reason,
-               "direction": _at(result.directions, k), "hit_object": _at(result.hit_objects, k),
-               "hit_mover": _at(result.hit_movers, k)}
+               "direction": at_or_none(result.directions, k),
+               "hit_object": at_or_none(result.hit_objects, k),
+               "hit_mover": at_or_none(result.hit_movers, k)}
         if action == "discrete":
             counts = np.bincount(np.asarray(actions).reshape(-1).astype(np.int64),
                                  minlength=len(DISCRETE_NAMES))
             row["actions"] = dict(zip(DISCRETE_NAMES, counts.tolist(), strict=True))
         rows.append(row)
     return rows
-
-
-def _at(values: Sequence[Any], k: int) -> Any:
-    return values[k] if k < len(values) else None
 
 
 def breakdown(result: EvaluationResult, objects: Sequence[Any] = ()) -> dict[str, Any]:
