@@ -131,6 +131,30 @@ def test_the_readme_s_results_table_is_what_the_script_writes():
         assert block.strip() == module.traffic_summary()
 
 
+def test_the_peers_paragraph_worked_example(tmp_path):
+    """Learners ranked by their worst seed's largest metric/threshold; an OmniSafe learner
+    below CRLLK-D is named."""
+    spec = importlib.util.spec_from_file_location("readme_results",
+                                                  REPO / "scripts" / "readme_results.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+
+    def learner(lanes, colls):
+        return {"J_clane": {"values": lanes}, "J_coll": {"values": colls}}
+
+    path = tmp_path / "peers.json"
+    path.write_text(json.dumps({
+        "thresholds": {"lane": 0.5, "collision": 0.02},
+        "settings": {"seeds": [0, 1], "episodes": 400},
+        "maps": {"small_loop": {"learners": {
+            "CRLLK-D": learner([0.2, 0.25], [0.0, 0.01]),        # worst 0.01/0.02 = 0.50
+            "OmniSafe PPOLag": learner([0.1, 0.2], [0.0, 0.0]),  # worst 0.2/0.5 = 0.40
+            "CRLLK-C": learner([0.3, 0.1], [0.04, 0.0])}}}}))    # worst 0.04/0.02 = 2.00
+    assert module.peers_summary(path).endswith(
+        "tightest first: on `small_loop` OmniSafe PPOLag 0.40, CRLLK-D 0.50, CRLLK-C 2.00. "
+        "OmniSafe does better than CRLLK-D with OmniSafe PPOLag on `small_loop`.")
+
+
 def test_the_traffic_paragraph_worked_example(tmp_path):
     """Each agent's seeds that hold, spans of its metrics, its multipliers and what it hit,
     from a hand-made document (one seed holds, one misses J_coll)."""
