@@ -423,6 +423,12 @@ def test_distance_ahead_leaves_out_only_points_that_cannot_count():
                      if p is not None and abs(p.lateral) <= half_width]
         expected = min((p.distance for p in projected), default=None)
         assert distance_ahead(dmap, lane, along, points, half_width, reach) == expected
+        for x, y in points:  # the lean measures give project's numbers
+            full, lean = route.project(x, y), route.locate(x, y)
+            assert (full is None) == (lean is None)
+            if full is not None:
+                distance, lateral, on = lean
+                assert (distance, lateral, on.heading_at(x, y)) == tuple(full)
 
 
 def test_outline_is_the_footprint_without_its_repeated_corners():

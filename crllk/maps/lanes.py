@@ -78,6 +78,16 @@ class Lane:
             heading=wrap_angle(angle + self.turn * math.pi / 2.0),
         )
 
+    def offsets(self, x: float, y: float) -> tuple[float, float]:
+        """(lateral, along) of ``project(x, y)``: the same numbers, without the heading."""
+        cx, cy = self.centre
+        dx, dy = x - cx, y - cy
+        if self.turn == 0:
+            tx, ty = math.cos(self.start_heading), math.sin(self.start_heading)
+            return dx * ty - dy * tx, dx * tx + dy * ty
+        return (self.turn * (math.hypot(dx, dy) - self.radius),
+                self.turn * wrap_angle(math.atan2(dy, dx) - self.start_angle) * self.radius)
+
     def along_within(self, x: float, y: float, half_width: float) -> float | None:
         """``project(x, y).along`` where the point lies within ``half_width`` (m) of the lane
         centre, else None: the same numbers, without the heading, and without the angle for

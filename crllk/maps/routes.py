@@ -97,6 +97,19 @@ class Route:
             return None
         return RoutePoint(distance, projection.lateral, projection.heading)
 
+    def locate(self, x: float, y: float) -> tuple[float, float, Lane] | None:
+        """(distance, lateral, lane) of ``project(x, y)`` without the heading (the lane's
+        ``heading_at(x, y)`` gives it), or None where ``project`` gives None."""
+        found = self._on_tile.get(self.map.tile_index(x, y))
+        if found is None:
+            return None
+        lane, start = found
+        lateral, along = lane.offsets(x, y)
+        distance = start + along
+        if not 0.0 <= distance <= self.reach:
+            return None
+        return distance, lateral, lane
+
     def distance_within(self, x: float, y: float, half_width: float) -> float | None:
         """``project(x, y).distance`` where that point lies within ``half_width`` (m) of its
         lane's centre, else None (the same numbers, computed with less)."""

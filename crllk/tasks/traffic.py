@@ -234,15 +234,16 @@ class Traffic:
         route = Route(self.map, lane, along, reach)
         found = []
         for box, (vx, vy) in self.movers(state):
-            points = [p for p in (route.project(x, y) for x, y in footprint_points(box))
-                      if p is not None]
-            inside = [p for p in points if abs(p.lateral) <= LANE_HALF_WIDTH]
+            points = [(located, x, y) for x, y in dict.fromkeys(footprint_points(box))
+                      if (located := route.locate(x, y)) is not None]
+            inside = [p for p in points if abs(p[0][1]) <= LANE_HALF_WIDTH]
             if not inside:
                 continue
-            nearest = min(inside, key=lambda p: p.distance)
-            speed = vx * math.cos(nearest.heading) + vy * math.sin(nearest.heading)
-            found.append(MoverAhead(nearest.distance, min(p.lateral for p in points),
-                                    max(p.lateral for p in points), speed))
+            (distance, _, nearest_lane), x, y = min(inside, key=lambda p: p[0][0])
+            heading = nearest_lane.heading_at(x, y)
+            speed = vx * math.cos(heading) + vy * math.sin(heading)
+            laterals = [p[0][1] for p in points]
+            found.append(MoverAhead(distance, min(laterals), max(laterals), speed))
         found.sort(key=lambda m: m.distance)
         return found[:count]
 
