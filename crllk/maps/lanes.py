@@ -63,20 +63,8 @@ class Lane:
 
     def project(self, x: float, y: float) -> Projection:
         """Signed lateral offset (positive right), distance along the lane, lane heading."""
-        cx, cy = self.centre
-        if self.turn == 0:
-            tx, ty = math.cos(self.start_heading), math.sin(self.start_heading)
-            dx, dy = x - cx, y - cy
-            return Projection(lateral=dx * ty - dy * tx, along=dx * tx + dy * ty,
-                              heading=self.start_heading)
-        dx, dy = x - cx, y - cy
-        angle = math.atan2(dy, dx)
-        swept = self.turn * wrap_angle(angle - self.start_angle)
-        return Projection(
-            lateral=self.turn * (math.hypot(dx, dy) - self.radius),
-            along=swept * self.radius,
-            heading=wrap_angle(angle + self.turn * math.pi / 2.0),
-        )
+        lateral, along = self.offsets(x, y)
+        return Projection(lateral=lateral, along=along, heading=self.heading_at(x, y))
 
     def offsets(self, x: float, y: float) -> tuple[float, float]:
         """(lateral, along) of ``project(x, y)``: the same numbers, without the heading."""
