@@ -127,6 +127,7 @@ def test_the_readme_s_results_table_is_what_the_script_writes():
         block = readme.split(module.PEERS_START, 1)[1].split(module.PEERS_END, 1)[0]
         assert block.strip() == module.peers_summary()
     if module.TRAFFIC.is_file():  # the traffic paragraph, once the experiment is committed
+        assert module.TRAFFIC_START in readme and module.TRAFFIC_END in readme
         block = readme.split(module.TRAFFIC_START, 1)[1].split(module.TRAFFIC_END, 1)[0]
         assert block.strip() == module.traffic_summary()
 
@@ -152,7 +153,7 @@ def test_the_peers_paragraph_worked_example(tmp_path):
             "CRLLK-C": learner([0.3, 0.1], [0.04, 0.0])}}}}))    # worst 0.04/0.02 = 2.00
     assert module.peers_summary(path).endswith(
         "tightest first: on `small_loop` OmniSafe PPOLag 0.40, CRLLK-D 0.50, CRLLK-C 2.00. "
-        "OmniSafe does better than CRLLK-D with OmniSafe PPOLag on `small_loop`.")
+        "Better than CRLLK-D: OmniSafe PPOLag on `small_loop`.")
 
 
 def test_the_traffic_paragraph_worked_example(tmp_path):
@@ -166,13 +167,15 @@ def test_the_traffic_paragraph_worked_example(tmp_path):
                    {"name": "collision", "metric": "J_coll"}]
     entry = {"runs": ["CRLLK-D-a0.5-seed0", "CRLLK-D-a0.5-seed1"], "constraints": constraints,
              "J_clane": {"values": [0.31, 0.27]}, "J_coll": {"values": [0.01, 0.05]},
+             "satisfied": [True, False],
              "multipliers": [{"lane": 0.0, "collision": 12.54}, {"lane": 0.0, "collision": 20.0}],
              "community": [{"episodes": 400, "collisions_by_kind": {"vehicle": 4}},
                            {"episodes": 400, "collisions_by_kind": {"vehicle": 16,
                                                                     "pedestrian": 4}}]}
-    entry["mode"] = {**entry, "J_coll": {"values": [0.0, 0.0]}}
+    entry["mode"] = {**entry, "J_coll": {"values": [0.0, 0.0]}, "satisfied": [True, True]}
     fixed = {**entry, "runs": entry["runs"][:1], "J_clane": {"values": [0.2]},
-             "J_coll": {"values": [0.3]}, "multipliers": [{"lane": 1.0, "collision": 5.0}],
+             "J_coll": {"values": [0.3]}, "satisfied": [False],
+             "multipliers": [{"lane": 1.0, "collision": 5.0}],
              "community": [{"episodes": 400, "collisions_by_kind": {}}]}
     del fixed["mode"]
     path = tmp_path / "traffic.json"
@@ -183,9 +186,9 @@ def test_the_traffic_paragraph_worked_example(tmp_path):
         "With traffic, from the camera (400 test episodes per run, "
         "[Traffic](docs/results/traffic.md)): on `traffic_loop`, **CRLLK-D** 1 of 2 seeds hold "
         "every constraint (2 of 2 in the deployed mode), J_clane 0.270–0.310, J_coll "
-        "0.010–0.050 (learned λ_coll 12.5–20.0; its 800 sampled test episodes hit: vehicle 20, "
-        "pedestrian 4); **PPO-D** 0 of 1 seeds hold every constraint, J_clane 0.200, J_coll "
-        "0.300 (fixed λ_coll 5.0; its 400 sampled test episodes hit: nothing).")
+        "0.010–0.050 (learned λ_lane 0.0, λ_coll 12.5–20.0; its 800 sampled test episodes hit: "
+        "vehicle 20, pedestrian 4); **PPO-D** 0 of 1 seeds hold every constraint, J_clane 0.200, "
+        "J_coll 0.300 (fixed λ_lane 1.0, λ_coll 5.0; its 400 sampled test episodes hit: nothing).")
 
 
 def test_every_results_file_named_exists():

@@ -61,6 +61,25 @@ def test_lane_centre_reads_zero_offset_and_heading_error(dmap):
             assert pose.along == pytest.approx(f * lane.length, abs=1e-9)
 
 
+def test_projection_inverts_point_at_on_every_lane(dmap):
+    """A point ``lateral`` (up to 15 cm, inside the tightest arc's radius) right of the centre
+    ``along`` a lane projects back to (lateral, along, the lane's heading there), on straights
+    and arcs; ``offsets`` and ``along_within`` give the same numbers, the latter None outside
+    its band."""
+    rng = np.random.default_rng(3)
+    for lane in dmap.lanes:
+        for along, lateral in zip(rng.uniform(0.0, lane.length, 20), rng.uniform(-0.15, 0.15, 20),
+                                  strict=True):
+            x, y, heading = lane.point_at(float(along), float(lateral))
+            projection = lane.project(x, y)
+            assert projection.lateral == pytest.approx(lateral, abs=1e-9)
+            assert projection.along == pytest.approx(along, abs=1e-9)
+            assert abs(_wrap(projection.heading - heading)) < 1e-9
+            assert lane.offsets(x, y) == (projection.lateral, projection.along)
+            assert lane.along_within(x, y, abs(lateral) + 1e-6) == projection.along
+            assert lane.along_within(x, y, abs(lateral) - 1e-6) is None
+
+
 def test_offsets_right_positive_left_negative(dmap):
     """0.05 m right of a lane centre reads +0.05, 0.05 m left reads -0.05."""
     for lane in dmap.lanes:

@@ -343,6 +343,21 @@ def test_off_road_tail_is_discounted_as_the_costs_are(overrides, tail):
     torch.testing.assert_close(added, torch.tensor([[0.0]] * 4 + [[tail]]))
 
 
+def test_the_learner_discounts_costs_by_cost_gamma():
+    """``ppo.cost_gamma`` reaches the PPO learner's cost GAE; the reward keeps ``ppo.gamma``."""
+    from crllk.algos.ppo_lagrangian import PPOLagrangian
+    from crllk.config import validate
+    from crllk.training.compose import compose_config
+
+    actor, critic, cost_critics = _networks()
+    for overrides, cost_gamma in (([], 0.95), (["ppo.cost_gamma=0.99"], 0.99)):
+        config = validate(compose_config(["task=small_loop", *overrides]))
+        learner = PPOLagrangian(config, actor, {"reward": critic, **cost_critics}, list(_COSTS))
+        assert float(learner.advantages.reward.gamma) == pytest.approx(0.95)
+        for name in _COSTS:
+            assert float(learner.advantages.costs[name].gamma) == pytest.approx(cost_gamma)
+
+
 def test_gae_helper_feeds_the_loss_with_renamed_keys():
     actor, critic, cost_critics = _networks()
     loss = CriticsPPOLoss(actor, critic, cost_critics)

@@ -19,7 +19,7 @@ def shape_signals(batch: TensorDictBase, config: TrainConfig, task: TaskConfig) 
     ``absorbing_off_road``, the lane-deviation cost of every later step of a terminated
     episode folded into its last step: the robot stays off the road at the task's
     ``off_road_lane_cost`` (dm) per step for ever, γ·c_off / (1 − γ) in discounted sum (γ
-    the costs' discount).
+    the PPO learner's cost discount, ``ppo.cost_gamma`` or else ``ppo.gamma``).
     Otherwise ending an episode early would cut its lane cost short and a large λ_lane would
     make leaving the road look cheap."""
     nxt = batch["next"]
