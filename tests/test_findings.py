@@ -274,3 +274,27 @@ def test_the_maps_without_obstacles_are_the_test_evaluations():
     assert "the misses are J_coll 0.03 (zigzag: CRLLK-C seed 2 sampled, CRLLK-D seed 2 deployed)" \
         in camera
     assert "one run (zigzag, PPO-C seed 1 sampled, J_coll 0.03)" in camera
+
+
+def test_the_cost_discount_trial_rows_are_its_evaluations():
+    """The cost-discount table of the findings: each run's validation evaluations, sampled
+    and mode, all episodes and the blocked direction, and its final λ_coll."""
+    root = REPO / "results/runs/pixels/obstacle_loop"
+
+    def cell(document: dict) -> str:
+        summary = document["summary"]
+        blocked = document["breakdown"]["by_direction"]["intended"]
+        return (f"{summary['J_clane']:.3f} / {summary['J_coll']:.2f}, blocked "
+                f"{blocked['J_coll']:.3f}")
+
+    for label, run in (("default, seed 0", "CRLLK-D-a0.5-seed0"),
+                       ("default, seed 1", "CRLLK-D-a0.5-seed1"),
+                       ("`ppo.cost_gamma=0.99`, seed 0", "CRLLK-D-costgamma99-a0.5-seed0"),
+                       ("`ppo.cost_gamma=0.99`, seed 1", "CRLLK-D-costgamma99-a0.5-seed1")):
+        sampled, mode = (json.loads((root / run / f"{name}.json").read_text())
+                         for name in ("eval", "eval-mode"))
+        assert sampled["evaluation"]["seed"] == mode["evaluation"]["seed"] == 1_000_000
+        lam = sampled["source"]["multipliers"]["collision"]
+        assert f"| {label} | {cell(sampled)} | {cell(mode)} | {lam:.1f} |" in FINDINGS
+    config = (root / "CRLLK-D-costgamma99-a0.5-seed0" / "config.yaml").read_text()
+    assert "cost_gamma: 0.99" in config
