@@ -650,9 +650,11 @@ def test_traffic_markdown_worked_example():
     document = {"title": "Lane keeping with traffic (pixels)",
                 "settings": {"obs": "pixels", "frames": 500000, "episodes": 400,
                              "eval_seed": TEST_SEED, "machine": "2 cores",
+                             "seeds": [0, 1], "crllk_seeds": [0, 1, 2],
                              "command": "python -m crllk.experiments traffic"},
                 "trained": 0, "evaluated": 0, "wall_s": 1.0,
-                "tasks": {"traffic_loop": {"about": "vehicles", "agents": {"CRLLK-D": entry},
+                "tasks": {"traffic_loop": {"about": "vehicles",
+                                           "agents": {"CRLLK-D": entry, "PPO-D": entry},
                                            "thresholds": {"lane": 0.5, "collision": 0.02,
                                                           "headway": 0.05},
                                            "teacher": {"discrete": {
@@ -660,6 +662,7 @@ def test_traffic_markdown_worked_example():
                                                "multipliers": [{}]}}}}}
     text = traffic_markdown(document)
     assert "Constraints: J_clane ≤ 0.5 dm, J_coll ≤ 0.02 per episode, J_chead ≤ 0.05" in text
+    assert "training seeds 0, 1, 2 (CRLLK agents) and 0, 1 (fixed-weight baselines)" in text
     assert ("| CRLLK-D | sampled | 1 | 0.310 (0.300–0.320) ✓ | 0.050 (0.030–0.080) ✗ +0.030 "
             "| 0.020 (0.010–0.030) ✓ | 4.50 | 17.1 | 6.40 | 0.031 | 0.00 | vehicle 20 "
             "| lane 0.00, collision 12.50, headway 0.50 |") in text
@@ -669,13 +672,15 @@ def test_traffic_markdown_worked_example():
 
 
 def test_traffic_trains_its_agents_that_agents_keeps():
-    """``traffic``: CRLLK-D, PPO-D and CRLLK-C on both tasks and every seed by default;
+    """``traffic``: CRLLK-D and CRLLK-C on three seeds, PPO-D on two, on both tasks by default;
     ``--agents`` narrows them (PPO-C is not one of its agents)."""
     from crllk.experiments.runs import Settings
     from crllk.experiments.traffic import TRAFFIC_TASKS, traffic_specs
 
-    every = traffic_specs(Settings(seeds=(0, 1)))
-    assert len(every) == 3 * len(TRAFFIC_TASKS) * 2
+    every = traffic_specs(Settings())
+    assert len(every) == (3 + 2 + 3) * len(TRAFFIC_TASKS)
     assert {s.agent for s in every} == {"CRLLK-D", "PPO-D", "CRLLK-C"}
-    narrowed = traffic_specs(Settings(seeds=(0,), agents=("CRLLK-D", "PPO-C")))
+    assert sorted(s.seed for s in every if s.agent == "PPO-D") == [0, 0, 1, 1]
+    assert sorted(s.seed for s in every if s.agent == "CRLLK-C") == [0, 0, 1, 1, 2, 2]
+    narrowed = traffic_specs(Settings(seeds=(0,), crllk_seeds=(0,), agents=("CRLLK-D", "PPO-C")))
     assert [(s.agent, s.task) for s in narrowed] == [("CRLLK-D", t) for t in TRAFFIC_TASKS]

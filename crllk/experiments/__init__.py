@@ -152,12 +152,12 @@ def main(argv: Sequence[str] | None = None) -> int:
                         help=f"training seeds of every run (default: "
                              f"{' '.join(map(str, Settings.seeds))}, and "
                              f"{' '.join(map(str, Settings.crllk_seeds))} for the CRLLK agents "
-                             f"of table1 and maps)")
+                             f"of table1, maps and traffic)")
     parser.add_argument("--crllk-seeds", type=int, nargs="+", default=None,
-                        help="table1 and maps: the CRLLK agents' training seeds (default: "
+                        help="table1, maps and traffic: the CRLLK agents' training seeds (default: "
                              "--seeds where given)")
     parser.add_argument("--agents", nargs="+", choices=list(AGENTS), default=list(AGENTS),
-                        help="table1 and maps: the agents to train and tabulate")
+                        help="table1, maps and traffic: the agents to train and tabulate")
     parser.add_argument("--episodes", type=int, default=Settings.episodes,
                         help="test episodes per run (on the test seed)")
     parser.add_argument("--obs", choices=("state", "pixels"), default=Settings.obs)

@@ -93,10 +93,10 @@ class Settings:
 
     frames: int = PIXEL_FRAMES
     seeds: tuple[int, ...] = (0, 1)
-    """Training seeds of every run but the CRLLK agents' in Table 1 and the maps tables."""
+    """Training seeds of every run but the CRLLK agents' in Table 1, the maps and traffic."""
     crllk_seeds: tuple[int, ...] = (0, 1, 2)
-    """Training seeds of the CRLLK agents in Table 1 and the maps tables (their claims rest on
-    three; the baselines keep two)."""
+    """Training seeds of the CRLLK agents in Table 1, the maps and traffic tables (their claims
+    rest on three; the baselines keep two)."""
     episodes: int = TEST_EPISODES
     obs: str = "pixels"
     jobs: int = 2
@@ -119,7 +119,7 @@ class Settings:
 
 
 def agent_seeds(settings: Settings, agent: str) -> tuple[int, ...]:
-    """The training seeds of ``agent`` in Table 1 and the maps tables."""
+    """The training seeds of ``agent`` in Table 1, the maps and traffic tables."""
     return settings.crllk_seeds if agent.startswith("CRLLK") else settings.seeds
 
 

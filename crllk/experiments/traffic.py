@@ -22,9 +22,15 @@ from typing import Any
 from crllk.evaluation.community import FORMATS, METRICS
 from crllk.evaluation.report import aggregate
 from crllk.evaluation.runs import evaluate_follower
-from crllk.experiments.runs import Outcome, RunSpec, Settings, train_and_evaluate
+from crllk.experiments.runs import Outcome, RunSpec, Settings, agent_seeds, train_and_evaluate
 from crllk.experiments.seeds import SEED_OF_RUN
-from crllk.experiments.tables import invocation, invocation_note, settings_dict, write_documents
+from crllk.experiments.tables import (
+    invocation,
+    invocation_note,
+    seeds_text,
+    settings_dict,
+    write_documents,
+)
 
 TRAFFIC_TASKS = {
     "traffic_loop": "other Duckiebots: one ahead in the robot's lane, slower than the robot may "
@@ -43,9 +49,10 @@ TEACHER_ACTIONS = ("discrete", "continuous")
 
 def traffic_specs(settings: Settings, tasks: Sequence[str] = tuple(TRAFFIC_TASKS)
                   ) -> list[RunSpec]:
-    """Every agent of :data:`TRAFFIC_AGENTS` that ``--agents`` keeps on every task and seed."""
+    """Every agent of :data:`TRAFFIC_AGENTS` that ``--agents`` keeps on every task, with its
+    training seeds (three for the CRLLK agents, two for the fixed-weight baseline)."""
     return [RunSpec(agent, task, seed) for task in tasks for agent in TRAFFIC_AGENTS
-            if agent in settings.agents for seed in settings.seeds]
+            if agent in settings.agents for seed in agent_seeds(settings, agent)]
 
 
 def traffic(settings: Settings) -> list[Path]:
@@ -138,6 +145,12 @@ def run_cells(entry: Mapping[str, Any], thresholds: Mapping[str, float]) -> list
     return rows
 
 
+def agents_of(document: Mapping[str, Any]) -> dict[str, None]:
+    """The learning agents of every task of a traffic document, in order."""
+    return dict.fromkeys(agent for block in document["tasks"].values()
+                         for agent in block["agents"])
+
+
 def traffic_markdown(document: Mapping[str, Any]) -> str:
     """The experiment's Markdown from its JSON document: per task, a row per agent, seed and
     policy."""
@@ -157,7 +170,8 @@ def traffic_markdown(document: Mapping[str, Any]) -> str:
              "term's teacher), answering in each action type, through the same episodes.", "",
              f"- Observation: `{settings['obs']}`; budget {settings['frames']:,} frames per run; "
              f"{settings['episodes']} test episodes per run from spawn seed "
-             f"{settings['eval_seed']} (the test seed).",
+             f"{settings['eval_seed']} (the test seed); training seeds "
+             f"{seeds_text(settings, list(agents_of(document)))}.",
              f"- Command: `{settings['command']}` ({invocation_note(document)}).",
              f"- Machine: {settings['machine']}.", ""]
     for task, block in document["tasks"].items():
