@@ -285,8 +285,8 @@ class LaneKeeping(control.Task):
         self.episode.previous_pose = physics.pose()
         physics.set_wheel_duty(duty)
         if self.traffic is not None:
-            self.traffic.step(self.episode.traffic, self.episode.previous_pose)
-            physics.set_mover_poses(self.traffic.poses(self.episode.traffic))
+            physics.set_mover_poses(self.traffic.step(self.episode.traffic,
+                                                      self.episode.previous_pose))
 
     def after_step(self, physics: Physics) -> None:
         self.episode.steps += 1

@@ -131,9 +131,10 @@ class Traffic:
         return [speed, wait, 0]
 
     # ----- stepping ---------------------------------------------------------------------
-    def step(self, state: dict[str, Any], robot: Pose) -> None:
+    def step(self, state: dict[str, Any], robot: Pose) -> list[Pose]:
         """Move every mover one control step, with the robot at ``robot`` (axle pose), and
-        keep their velocities (m/s, world frame) over the step in ``state["velocities"]``."""
+        keep their velocities (m/s, world frame) over the step in ``state["velocities"]``;
+        returns their :meth:`poses` after the step."""
         robot_box = duckiebot_box(*robot)
         robot_points = outline(robot_box)
         before = self.poses(state)
@@ -153,9 +154,10 @@ class Traffic:
         self._outlines = (_positions(state), vehicle_points)
         for k, pedestrian in enumerate(state["pedestrians"]):
             self._walk(state["seed"], k, pedestrian, [robot_box, *vehicle_boxes])
+        after = self.poses(state)
         state["velocities"] = [[(x1 - x0) / self.dt, (y1 - y0) / self.dt]
-                               for (x0, y0, _), (x1, y1, _) in zip(before, self.poses(state),
-                                                                   strict=True)]
+                               for (x0, y0, _), (x1, y1, _) in zip(before, after, strict=True)]
+        return after
 
     def _vehicle_speed(self, lane: Lane, along: float, cruise: float,
                        points: list[tuple[float, float]]) -> float:
