@@ -7,6 +7,7 @@
     python -m crllk.evaluate teacher=true task=obstacle_loop action=discrete   # ... in 3 turns
     python -m crllk.evaluate teacher=true task=obstacle_loop margin=0.06       # ... 6 cm clear
     python -m crllk.evaluate run=... episodes=100 record=true record_episodes=2 [viewer=spawn]
+    python -m crllk.evaluate run=... fleet=4 episodes=25   # 4 robots, each driven by the policy
 
 Each run's checkpoint plays ``episodes`` seeded episodes (episode k in sub-environment
 k mod ``num_envs``, spawns from ``seed``, by default the run's evaluation seed, never a
@@ -97,7 +98,11 @@ class EvaluateConfig:
     (named or a task file), its recording's, and the follower's and teacher's task; a run's
     result goes to ``<run>/<name>.json``."""
     name: str = setting("eval", check=file_stem)
-    """The result's file name in each run directory, without ``.json``."""
+    """The result's file name in each run directory, without ``.json`` (with ``fleet``:
+    ``fleet`` unless given)."""
+    fleet: int = setting(0, check=non_negative)
+    """Robots on the map, every one driven by the run's policy from its own camera, with
+    ``episodes`` fleet episodes (:mod:`crllk.evaluation.fleet`); 0: the run's one robot."""
     thresholds: dict[str, float] = field(default_factory=algo_thresholds)
     """The follower's and teacher's constraint thresholds (``thresholds.lane=0.75``); a run
     is judged by its own ``algo.constraints``."""
@@ -108,6 +113,10 @@ class EvaluateConfig:
     def problems(self) -> Iterator[tuple[str, str]]:
         if not self.run_dirs() and not self.follower and not self.teacher:
             yield "run", "give run=<run_dir>, runs=[...], follower=true or teacher=true"
+        if self.fleet and not self.run_dirs():
+            yield "fleet", "a fleet is driven by a run's policy: give run=<run_dir>"
+        if self.fleet and self.record:
+            yield "record", "fleet evaluations are not recorded"
         for run_dir in self.run_dirs():
             if not run_dir.is_dir():
                 yield "run", f"no such run directory: {run_dir}"
@@ -153,6 +162,16 @@ def main(argv: Sequence[str] | None = None) -> int:
             check_task_overrides(config.task, config.overrides, config.overrides, SOURCE)
         documents = []
         for run_dir in config.run_dirs():
+            if config.fleet:
+                from crllk.evaluation.fleet import FLEET_FILE, evaluate_fleet
+
+                documents.append(evaluate_fleet(
+                    run_dir, robots=config.fleet, episodes=config.episodes,
+                    deterministic=config.deterministic, seed=config.seed,
+                    overrides=config.overrides,
+                    name=FLEET_FILE if config.name == "eval" else config.name))
+                print(format_summary(documents[-1]), flush=True)
+                continue
             documents.append(evaluate_run(run_dir, episodes=config.episodes,
                                           deterministic=config.deterministic,
                                           seed=config.seed, num_envs=config.num_envs,

@@ -132,10 +132,11 @@ def evaluate_run(run_dir: str | Path, *, episodes: int, deterministic: bool = Fa
 def write_evaluation(run_dir: str | Path, config: TrainConfig, env: LaneKeepingEnv,
                      result: EvaluationResult, info: dict[str, Any], *,
                      settings: dict[str, Any], overrides: Mapping[str, Any] | None = None,
-                     name: str | None = None) -> dict[str, Any]:
+                     name: str | None = None,
+                     extra: Mapping[str, Any] | None = None) -> dict[str, Any]:
     """Writes the evaluation document of a run's episodes ``result`` (played in ``env`` with
     ``settings``) to ``<run_dir>/eval.json`` (or ``<name>.json``) and returns it; ``info``
-    holds the policy's counters and multipliers."""
+    holds the policy's counters and multipliers, ``extra`` more sections of the document."""
     source = {"run_dir": str(run_dir), "task": config.task_name, "algo": config.algo.name,
               "action": config.action.name, "obs": config.obs.name, "train_seed": config.seed,
               **info}
@@ -148,6 +149,7 @@ def write_evaluation(run_dir: str | Path, config: TrainConfig, env: LaneKeepingE
                                settings=settings, source=source,
                                objects=env.config.map.objects,
                                scales=community.Scales.of(env.config))
+    document.update(extra or {})
     atomic_write_text(result_path(run_dir, name), json.dumps(document, indent=1) + "\n")
     return document
 

@@ -8,7 +8,7 @@ on the environment's seed and ``N``, never on timing.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from functools import partial
 from typing import Any
@@ -44,6 +44,20 @@ class EvaluationResult:
     hit_movers: list[int | None] = field(default_factory=list)
     lateral_deviations: list[float | None] = field(default_factory=list)
     outside_lane_steps: list[int | None] = field(default_factory=list)
+
+    @classmethod
+    def of_rows(cls, rows: Sequence[tuple[Any, ...]],
+                constraints: Sequence[Constraint]) -> EvaluationResult:
+        """The result of episodes given as rows (stats, termination, actions, direction,
+        hit object, hit mover, lateral deviation, outside-lane steps), in episode order."""
+        stats = [row[0] for row in rows]
+        return cls(episodes=stats, summary=summarise(stats, constraints),
+                   constraints=tuple(constraints),
+                   terminations=[row[1] for row in rows], actions=[row[2] for row in rows],
+                   directions=[row[3] for row in rows], hit_objects=[row[4] for row in rows],
+                   hit_movers=[row[5] for row in rows],
+                   lateral_deviations=[row[6] for row in rows],
+                   outside_lane_steps=[row[7] for row in rows])
 
 
 class Rollout:
@@ -142,16 +156,7 @@ def _run_episodes(env: LaneKeepingEnv, policy: Callable[[TensorDictBase], Tensor
         while (played < quotas).any():
             rollout.step(finish_episodes)
     ordered = [by_env[k % num_envs][k // num_envs] for k in range(episodes)]
-    stats = [entry[0] for entry in ordered]
-    return EvaluationResult(episodes=stats, summary=summarise(stats, constraints),
-                            constraints=tuple(constraints),
-                            terminations=[entry[1] for entry in ordered],
-                            actions=[entry[2] for entry in ordered],
-                            directions=[entry[3] for entry in ordered],
-                            hit_objects=[entry[4] for entry in ordered],
-                            hit_movers=[entry[5] for entry in ordered],
-                            lateral_deviations=[entry[6] for entry in ordered],
-                            outside_lane_steps=[entry[7] for entry in ordered])
+    return EvaluationResult.of_rows(ordered, constraints)
 
 
 __all__ = ["EvaluationResult", "Rollout", "collect", "episode_quotas", "run_episodes"]
