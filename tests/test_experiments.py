@@ -684,3 +684,58 @@ def test_traffic_trains_its_agents_that_agents_keeps():
     assert sorted(s.seed for s in every if s.agent == "CRLLK-C") == [0, 0, 1, 1, 2, 2]
     narrowed = traffic_specs(Settings(seeds=(0,), crllk_seeds=(0,), agents=("CRLLK-D", "PPO-C")))
     assert [(s.agent, s.task) for s in narrowed] == [("CRLLK-D", t) for t in TRAFFIC_TASKS]
+
+
+def test_fleet_at_a_tiny_budget(tmp_path):
+    """``experiments fleet`` end to end: CRLLK-D and PPO-D trained from pixels on traffic_loop,
+    tested alone and in a fleet of four robots (one fleet episode: as many robot-episodes as
+    --episodes asks, at least one fleet episode), the Markdown rebuilt from the JSON."""
+    from crllk.experiments.fleet import FLEET_AGENTS, FLEET_ROBOTS, fleet_markdown
+
+    tiny = [*TINY_EXPERIMENT, "--agents", *FLEET_AGENTS]
+    results = _run_tiny_experiment("fleet", tiny, tmp_path)
+    document = json.loads((results / "fleet.json").read_text())
+    assert list(document["agents"]) == list(FLEET_AGENTS)
+    for block in document["agents"].values():
+        assert block["alone"]["community"][0]["episodes"] == 2
+        assert block["fleet"]["community"][0]["episodes"] == FLEET_ROBOTS
+        assert [robot["episodes"] for robot in block["by_robot"][0]] == [1] * FLEET_ROBOTS
+    text = (results / "fleet.md").read_text()
+    assert text == fleet_markdown(document)
+    assert "| CRLLK-D | alone | 0 |" in text and "| PPO-D | fleet | 0 |" in text
+
+
+def test_fleet_markdown_worked_example():
+    """A fleet table's rows from a hand-made document: the run alone and in the fleet, each
+    robot's J_coll in the fleet row only."""
+    from crllk.experiments.fleet import fleet_markdown
+
+    constraints = [{"name": "lane", "metric": "J_clane", "unit": "dm"},
+                   {"name": "collision", "metric": "J_coll", "unit": "per episode"}]
+
+    def entry(j_coll: float, hits: dict) -> dict:
+        return {"runs": ["r/traffic_loop/CRLLK-D-a0.5-seed2"], "constraints": constraints,
+                "J_clane": {"values": [0.2]}, "J_coll": {"values": [j_coll]},
+                "J_R": {"values": [4.0]},
+                "community": [{"survival_time_s": {"median": 17.1}, "distance_tiles":
+                               {"median": 6.4}, "lateral_deviation_m": {"median": 0.031},
+                               "outside_lane_s": {"median": 0.0}, "collisions_by_kind": hits}],
+                "multipliers": [{"lane": 0.0, "collision": 12.5}]}
+
+    document = {"title": "Every robot driven by the policy (pixels)",
+                "settings": {"obs": "pixels", "episodes": 400, "eval_seed": TEST_SEED,
+                             "machine": "2 cores", "seeds": [0, 1], "crllk_seeds": [0, 1, 2],
+                             "command": "python -m crllk.experiments fleet", "robots": 4,
+                             "fleet_episodes": 100},
+                "wall_s": 60.0, "task": "traffic_loop",
+                "thresholds": {"lane": 0.5, "collision": 0.02},
+                "agents": {"CRLLK-D": {"alone": entry(0.01, {}),
+                                       "fleet": entry(0.05, {"vehicle": 20}),
+                                       "by_robot": [[{"J_coll": 0.04}, {"J_coll": 0.06},
+                                                     {"J_coll": 0.05}, {"J_coll": 0.05}]]}}}
+    text = fleet_markdown(document)
+    assert "100 fleet episodes of 4 robots (400 robot-episodes)" in text
+    assert ("| CRLLK-D | alone | 2 | 0.200 ✓ | 0.010 ✓ | 4.00 | 17.1 | 6.40 | 0.031 | 0.00 "
+            "| none | — |") in text
+    assert ("| CRLLK-D | fleet | 2 | 0.200 ✓ | 0.050 ✗ +0.030 | 4.00 | 17.1 | 6.40 | 0.031 "
+            "| 0.00 | vehicle 20 | 0.040 / 0.060 / 0.050 / 0.050 |") in text

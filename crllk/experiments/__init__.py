@@ -10,6 +10,7 @@
     python -m crllk.experiments realmaps  # CRLLK-D on two real Duckietown maps nobody tuned on
     python -m crllk.experiments peers --obs state  # crllk's learners beside OmniSafe's
     python -m crllk.experiments traffic   # CRLLK-D, PPO-D, CRLLK-C with vehicles and pedestrians
+    python -m crllk.experiments fleet     # every robot of traffic_loop driven by the policy
     python -m crllk.experiments all       # table1, maps and figure1
 
 Every experiment trains its runs as trainer multiruns (``python -m crllk.train -m
@@ -44,6 +45,7 @@ from crllk.errors import ConfigError
 from crllk.evaluation.robustness import conditions
 from crllk.experiments.aids import aids
 from crllk.experiments.figure1 import figure1_markdown
+from crllk.experiments.fleet import fleet
 from crllk.experiments.peers import peers
 from crllk.experiments.realmaps import realmaps
 from crllk.experiments.robustness import robustness
@@ -119,7 +121,7 @@ def figure1(settings: Settings) -> list[Path]:
 
 EXPERIMENTS = {"table1": table1, "maps": maps, "figure1": figure1, "sweep": sweep,
                "robustness": robustness, "teacher": teacher, "aids": aids,
-               "realmaps": realmaps, "peers": peers, "traffic": traffic}
+               "realmaps": realmaps, "peers": peers, "traffic": traffic, "fleet": fleet}
 ALL = ("table1", "maps", "figure1")
 """What ``all`` runs (the sweep is asked for by name)."""
 
@@ -157,7 +159,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                         help="table1, maps and traffic: the CRLLK agents' training seeds (default: "
                              "--seeds where given)")
     parser.add_argument("--agents", nargs="+", choices=list(AGENTS), default=list(AGENTS),
-                        help="table1, maps and traffic: the agents to train and tabulate")
+                        help="table1, maps, traffic and fleet: the agents to train and tabulate")
     parser.add_argument("--episodes", type=int, default=Settings.episodes,
                         help="test episodes per run (on the test seed)")
     parser.add_argument("--obs", choices=("state", "pixels"), default=Settings.obs)
