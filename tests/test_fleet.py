@@ -76,20 +76,38 @@ def test_each_simulation_shows_the_other_robots_where_their_simulations_have_the
     env.close()
 
 
+def face_to_face(env) -> None:
+    """Robot 1 0.35 m ahead of robot 0, facing it."""
+    x, y, yaw = env.physics[0].pose()
+    env.physics[1].set_pose(x + 0.35 * math.cos(yaw), y + 0.35 * math.sin(yaw), yaw + math.pi)
+    env.physics[1].forward()
+
+
+def test_the_first_camera_frame_shows_the_other_robots():
+    """The observation a fleet episode starts from already has the other robots in it: robot
+    0's first frame is its camera's image with robot 1 0.35 m ahead, which differs from the
+    same view without it in more than 3 % of the pixels."""
+    env = make_env("small_loop", num_envs=2, observation="pixels", action="discrete", seed=0,
+                   lane_pose=True, overrides={"traffic": fleet_traffic(2)})
+    board = join_fleet(env)
+    first = start_apart(env, board, face_to_face)["pixels"][0].numpy()
+    physics = env.physics[0]
+    np.testing.assert_array_equal(first, env.tasks[0].camera_image(physics))
+    physics.set_mover_poses([PARKED])
+    physics.forward()
+    without = env.tasks[0].camera_image(physics)
+    env.close()
+    changed = np.any(first != without, axis=-1)
+    assert changed.mean() > 0.03  # robot 1 covers about 6 % of the image
+
+
 def test_robots_driving_head_on_both_collide_with_each_other():
     """Robot 1 placed 0.35 m ahead of robot 0 in its lane, facing it; both drive straight:
     both episodes end in a collision within 30 steps, each having hit the other."""
     env, board = fleet_env(2)
 
-    def face_to_face(env, board):
-        x, y, yaw = env.physics[0].pose()
-        ahead = (x + 0.35 * math.cos(yaw), y + 0.35 * math.sin(yaw), yaw + math.pi)
-        env.physics[1].set_pose(*ahead)
-        env.physics[1].forward()
-        board.poses = [physics.pose() for physics in env.physics]
-
     result, hit_robots = play_fleet(env, straight, board, 1, deterministic=True,
-                                    on_start=face_to_face)
+                                    arrange=face_to_face)
     env.close()
     assert result.terminations == ["collision", "collision"]
     assert [e.length for e in result.episodes] < [30, 30]

@@ -232,6 +232,18 @@ class BatchedLaneKeepingEnv(EnvBase):
             indices = mask.reshape(self.num_envs).nonzero().flatten().tolist()
         for i in indices:
             self._reset_one(i)
+        return self._restarted(indices)
+
+    def observe_again(self) -> TensorDictBase:
+        """Every simulation's observation taken again as it stands, returned as a reset
+        returns it: for episodes whose scene was changed after their reset (a fleet's robots
+        placed in each other's simulations, :mod:`crllk.evaluation.fleet`)."""
+        for i, (physics, task) in enumerate(zip(self.physics, self.tasks, strict=True)):
+            self._observe(i, physics, task)
+        return self._restarted(range(self.num_envs))
+
+    def _restarted(self, indices: Sequence[int]) -> TensorDictBase:
+        """What a reset of sub-environments ``indices`` returns, their observations taken."""
         self._apply_camera_effects(indices)
         if self.history is not None:
             self.history.restart(indices, self._observations[list(indices)])

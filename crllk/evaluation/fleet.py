@@ -142,10 +142,13 @@ def join_fleet(env: BatchedLaneKeepingEnv) -> FleetBoard:
     return board
 
 
-def start_apart(env: BatchedLaneKeepingEnv, board: FleetBoard) -> TensorDictBase:
+def start_apart(env: BatchedLaneKeepingEnv, board: FleetBoard,
+                arrange: Callable[[BatchedLaneKeepingEnv], None] | None = None
+                ) -> TensorDictBase:
     """Resets every simulation, then each robot again until its footprint is at least
-    :data:`FLEET_CLEARANCE` from those of the robots before it; returns what the policy acts
-    on first (every robot on the road).
+    :data:`FLEET_CLEARANCE` from those of the robots before it (then ``arrange``, if given,
+    may move them); places every robot in the others' simulations and returns what the policy
+    acts on first (every robot on the road, in every camera).
 
     Raises:
         RuntimeError: when a robot cannot be placed apart in :data:`SPAWN_TRIES` spawns.
@@ -163,31 +166,34 @@ def start_apart(env: BatchedLaneKeepingEnv, board: FleetBoard) -> TensorDictBase
         else:
             raise RuntimeError(f"no spawn of robot {robot} keeps {FLEET_CLEARANCE} m from the "
                                f"others in {SPAWN_TRIES} tries: fewer robots, or a larger map")
-    td = td.exclude("_reset")
+    if arrange is not None:
+        arrange(env)
     board.poses = [physics.pose() for physics in env.physics]
     board.active = [True] * env.num_envs
-    return td
+    for physics, task in zip(env.physics, env.tasks, strict=True):
+        task.episode.traffic = task.traffic.reset(task.random, task.lane_pose.lane, 0.0)
+        physics.set_mover_poses(task.traffic.poses(task.episode.traffic))
+        physics.forward()
+    return env.observe_again()
 
 
 def play_fleet(env: BatchedLaneKeepingEnv,
                policy: Callable[[TensorDictBase], TensorDictBase], board: FleetBoard,
                episodes: int, *, deterministic: bool = False,
-               on_start: Callable[[BatchedLaneKeepingEnv, FleetBoard], None] | None = None
+               arrange: Callable[[BatchedLaneKeepingEnv], None] | None = None
                ) -> tuple[EvaluationResult, list[int | None]]:
     """``episodes`` fleet episodes on ``env`` (joined by :func:`join_fleet`): the
     robot-episodes, episode by episode and robot by robot (``env_index`` is the robot;
     ``hit_movers`` the mover of its simulation a collision hit), and the robot each hit
-    (None: none). ``on_start`` may move the robots (and must then update ``board.poses``)
-    before each fleet episode's first step."""
+    (None: none). ``arrange`` may move the robots at the start of each fleet episode
+    (:func:`start_apart`)."""
     robots = env.num_envs
     constraints = env.constraints
     rows: list[tuple[Any, ...]] = []
     exploration = ExplorationType.DETERMINISTIC if deterministic else ExplorationType.RANDOM
     with set_exploration_type(exploration), torch.no_grad():
         for _ in range(episodes):
-            td = start_apart(env, board)
-            if on_start is not None:
-                on_start(env, board)
+            td = start_apart(env, board, arrange)
             rows += _fleet_episode(env, Rollout(env, policy, td), board, constraints, robots)
     result = EvaluationResult.of_rows(rows, constraints)
     hit_robots = [None if row[5] is None else board.robot_of_mover(row[0].env_index, row[5])
