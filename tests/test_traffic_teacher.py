@@ -17,6 +17,7 @@ from crllk.envs.batched import make_env
 from crllk.maps.routes import advance, opposite_lane
 from crllk.rl.models import STATE_FEATURE_SCALES, state_feature_scales
 from crllk.sim import constants as C
+from crllk.tasks.actions import action_duty, duty_to_action
 from crllk.tasks.follower import FollowerGains, FollowerPolicy, LaneFollower, task_headway
 from crllk.tasks.following import FRONT
 from crllk.tasks.lane_keeping import MOVER_RANGE, MOVERS_REPORTED, state_feature_names
@@ -157,6 +158,33 @@ def test_follower_waits_for_a_crossing_pedestrian_and_passes_after(load):
         else:
             assert env.task.outcome.termination == "collision"
             assert env.task.hit_mover == 0
+
+
+@pytest.mark.parametrize("ahead", [0.3, 0.4, 0.5])
+def test_continuous_actions_cannot_wait_for_a_duckie_crossing_close_ahead(load, ahead):
+    """A duckie walks into the robot's lane from its right ``ahead`` (m) in front, at 0.08
+    m/s: the follower answering in wheel duties stops and lets it cross; answering in the
+    nearest continuous actions, whose least velocity still drives forward, it creeps into the
+    duckie. Why the continuous teacher collides on pedestrian_loop."""
+    for action in ("duty", "continuous"):
+        env = load("pedestrian_loop", seed=0)
+        env.reset()
+        crossing_scene(env, 1, 0.0, 0.08, env.task.traffic.crossings[0].centre[0] + ahead)
+        follower = follower_of(env)
+        speeds = []
+        for _ in range(400):
+            duty = follower.duty(env.physics, env.task.movers)
+            if action == "continuous":
+                duty = np.array(action_duty(action, duty_to_action(action, duty)))
+            ts = env.step(duty)
+            speeds.append(env.physics.forward_speed())
+            if ts.last():
+                break
+        if action == "duty":
+            assert env.task.outcome.termination is None and min(speeds) < 0.01
+        else:
+            assert env.task.outcome.termination == "collision" and env.task.hit_mover == 0
+            assert min(speeds[20:-1]) > 0.03  # never stood still before the collision
 
 
 def test_a_pedestrian_holding_beside_the_robot_lets_it_pass(load):
