@@ -11,7 +11,8 @@ ranks, per map of ``results/state/peers.json``, every learner by its worst seed'
 metric over its threshold, and says whether an OmniSafe learner beats CRLLK-D; the traffic
 paragraph, per task of
 ``results/pixels/traffic.json``, each agent's seeds that hold, its metrics, multipliers and
-collisions. A test checks that the README holds exactly what this writes.
+collisions; the fleet paragraph, from ``results/pixels/fleet.json``, each agent's J_coll alone
+and in the fleet. A test checks that the README holds exactly what this writes.
 """
 
 from __future__ import annotations
@@ -28,6 +29,8 @@ PEERS_START, PEERS_END = "<!-- peers-summary -->", "<!-- /peers-summary -->"
 PEERS = REPO / "results" / "state" / "peers.json"
 TRAFFIC_START, TRAFFIC_END = "<!-- traffic-summary -->", "<!-- /traffic-summary -->"
 TRAFFIC = REPO / "results" / "pixels" / "traffic.json"
+FLEET_START, FLEET_END = "<!-- fleet-summary -->", "<!-- /fleet-summary -->"
+FLEET = REPO / "results" / "pixels" / "fleet.json"
 MULTIPLIER_NAMES = {"lane": "λ_lane", "collision": "λ_coll", "headway": "λ_head"}
 
 
@@ -127,6 +130,33 @@ def traffic_summary(path: Path = TRAFFIC) -> str:
             + "; ".join(sentences) + ".")
 
 
+def fleet_summary(path: Path = FLEET) -> str:
+    """One paragraph from the fleet experiment: per agent, its seeds' J_coll and J_clane alone
+    among the scripted traffic and as one of the robots its policy drives, and how many of the
+    fleet's robot-episodes hold every constraint."""
+    document = json.loads(path.read_text())
+    settings = document["settings"]
+    sentences = []
+    for agent, block in document["agents"].items():
+        alone, fleet = block["alone"], block["fleet"]
+        robot_episodes = sum((c or {}).get("episodes", 0) for c in fleet["community"])
+        kinds: dict[str, int] = {}
+        for community in fleet["community"]:
+            for name, count in ((community or {}).get("collisions_by_kind") or {}).items():
+                kinds[name] = kinds.get(name, 0) + count
+        hits = ", ".join(f"{name} {count}" for name, count in kinds.items()) or "nothing"
+        sentences.append(
+            f"**{agent}** J_coll {_span(alone['J_coll']['values'], 3)} alone, "
+            f"{_span(fleet['J_coll']['values'], 3)} in the fleet, J_clane "
+            f"{_span(alone['J_clane']['values'], 3)} and {_span(fleet['J_clane']['values'], 3)}"
+            f" ({sum(fleet['satisfied'])} of {len(fleet['runs'])} seeds hold every constraint "
+            f"in the fleet; its {robot_episodes} robot-episodes hit: {hits})")
+    return (f"Every robot driven by the policy, on `{document['task']}` "
+            f"({settings['robots']} robots, {settings['fleet_episodes'] * settings['robots']} "
+            "robot-episodes per run on the test seed, [Every robot driven by the policy]"
+            "(docs/results/fleet.md)): " + "; ".join(sentences) + ".")
+
+
 def _replace(text: str, start: str, end: str, block: str) -> str:
     head, rest = text.split(start, 1)
     tail = rest.split(end, 1)[1]
@@ -139,6 +169,8 @@ def write(readme: Path = REPO / "README.md") -> None:
         text = _replace(text, PEERS_START, PEERS_END, peers_summary())
     if TRAFFIC.is_file():
         text = _replace(text, TRAFFIC_START, TRAFFIC_END, traffic_summary())
+    if FLEET.is_file():
+        text = _replace(text, FLEET_START, FLEET_END, fleet_summary())
     readme.write_text(text)
 
 
@@ -151,3 +183,5 @@ if __name__ == "__main__":
             print(peers_summary())
         if TRAFFIC.is_file():
             print(traffic_summary())
+        if FLEET.is_file():
+            print(fleet_summary())

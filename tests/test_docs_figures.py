@@ -130,6 +130,10 @@ def test_the_readme_s_results_table_is_what_the_script_writes():
         assert module.TRAFFIC_START in readme and module.TRAFFIC_END in readme
         block = readme.split(module.TRAFFIC_START, 1)[1].split(module.TRAFFIC_END, 1)[0]
         assert block.strip() == module.traffic_summary()
+    if module.FLEET.is_file():  # the fleet paragraph, once the experiment is committed
+        assert module.FLEET_START in readme and module.FLEET_END in readme
+        block = readme.split(module.FLEET_START, 1)[1].split(module.FLEET_END, 1)[0]
+        assert block.strip() == module.fleet_summary()
 
 
 def test_the_peers_paragraph_worked_example(tmp_path):
@@ -189,6 +193,34 @@ def test_the_traffic_paragraph_worked_example(tmp_path):
         "0.010–0.050 (learned λ_lane 0.0, λ_coll 12.5–20.0; its 800 sampled test episodes hit: "
         "vehicle 20, pedestrian 4); **PPO-D** 0 of 1 seeds hold every constraint, J_clane 0.200, "
         "J_coll 0.300 (fixed λ_lane 1.0, λ_coll 5.0; its 400 sampled test episodes hit: nothing).")
+
+
+def test_the_fleet_paragraph_worked_example(tmp_path):
+    """Per agent: J_coll and J_clane alone and in the fleet over seeds, the seeds that hold in
+    the fleet and what its robot-episodes hit."""
+    spec = importlib.util.spec_from_file_location("readme_results",
+                                                  REPO / "scripts" / "readme_results.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+
+    def entry(colls, lanes, satisfied, community):
+        return {"J_coll": {"values": colls}, "J_clane": {"values": lanes},
+                "satisfied": satisfied, "runs": ["a", "b"], "community": community}
+
+    path = tmp_path / "fleet.json"
+    path.write_text(json.dumps({
+        "task": "traffic_loop", "settings": {"robots": 4, "fleet_episodes": 100},
+        "agents": {"CRLLK-D": {
+            "alone": entry([0.05, 0.045], [0.15, 0.144], [False, False], [{}, {}]),
+            "fleet": entry([0.03, 0.0125], [0.2, 0.21], [False, True],
+                           [{"episodes": 400, "collisions_by_kind": {"vehicle": 12}},
+                            {"episodes": 400, "collisions_by_kind": {"vehicle": 5}}])}}}))
+    assert module.fleet_summary(path) == (
+        "Every robot driven by the policy, on `traffic_loop` (4 robots, 400 robot-episodes per "
+        "run on the test seed, [Every robot driven by the policy](docs/results/fleet.md)): "
+        "**CRLLK-D** J_coll 0.045–0.050 alone, 0.013–0.030 in the fleet, J_clane 0.144–0.150 "
+        "and 0.200–0.210 (1 of 2 seeds hold every constraint in the fleet; its 800 "
+        "robot-episodes hit: vehicle 17).")
 
 
 def test_every_results_file_named_exists():
