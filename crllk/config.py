@@ -105,9 +105,9 @@ class AlgoConfig:
 
 @dataclass
 class ActionConfig:
-    """The action space (``action=discrete|continuous|duckietown``)."""
+    """The action space (``action=discrete|continuous|stoppable|duckietown``)."""
 
-    name: str = setting(check=one_of("discrete", "continuous", "duckietown"))
+    name: str = setting(check=one_of("discrete", "continuous", "stoppable", "duckietown"))
     baseline_collision_weight: float = setting(check=non_negative)
     """The fixed collision weight of the PPO baseline with this action space."""
 

@@ -35,7 +35,7 @@ HISTORY = ["obs.history=2", "obs.history_stride=3"]
 
 
 @pytest.fixture(scope="module", params=["pixels-discrete", "pixels-continuous", "state-discrete",
-                                        "pixels-discrete-history"])
+                                        "pixels-discrete-history", "state-stoppable"])
 def exported(request, tmp_path_factory):
     obs, action, *history = request.param.split("-")
     run = run_in_process(tmp_path_factory.mktemp(request.param) / "run", 1,

@@ -608,23 +608,23 @@ def test_traffic_at_a_tiny_budget(tmp_path):
     """``experiments traffic`` end to end: its agents trained from pixels on both traffic
     tasks, tested on the test seed with the community's metrics, the Markdown rebuilt from the
     JSON."""
-    from crllk.experiments.traffic import TRAFFIC_AGENTS, TRAFFIC_TASKS, traffic_markdown
+    from crllk.experiments.traffic import TRAFFIC_TASKS, traffic_markdown
 
     results = _run_tiny_experiment("traffic", TINY_EXPERIMENT, tmp_path)
     document = json.loads((results / "traffic.json").read_text())
     assert list(document["tasks"]) == list(TRAFFIC_TASKS)
     for task, block in document["tasks"].items():
-        assert list(block["agents"]) == list(TRAFFIC_AGENTS)
+        assert list(block["agents"]) == ["CRLLK-D", "PPO-D", "CRLLK-C-stoppable"]
         for entry in block["agents"].values():
             assert "mode" in entry and entry["community"][0]["episodes"] == 2
-        assert list(block["teacher"]) == ["discrete", "continuous"]
+        assert list(block["teacher"]) == ["discrete", "continuous", "stoppable"]
         assert block["teacher"]["discrete"]["community"][0]["episodes"] == 2
         metrics = [c["metric"] for c in block["agents"]["CRLLK-D"]["constraints"]]
         assert ("J_chead" in metrics) == (task == "traffic_loop")
     text = (results / "traffic.md").read_text()
     assert text == traffic_markdown(document)
     assert "| CRLLK-D | sampled | 0 |" in text and "| PPO-D | mode | 0 |" in text
-    assert "| teacher | continuous | — |" in text
+    assert "| teacher | continuous | — |" in text and "| teacher | stoppable | — |" in text
 
 
 def test_traffic_markdown_worked_example():
@@ -682,6 +682,10 @@ def test_traffic_trains_its_agents_that_agents_keeps():
     assert {s.agent for s in every} == {"CRLLK-D", "PPO-D", "CRLLK-C"}
     assert sorted(s.seed for s in every if s.agent == "PPO-D") == [0, 0, 1, 1]
     assert sorted(s.seed for s in every if s.agent == "CRLLK-C") == [0, 0, 1, 1, 2, 2]
+    continuous = [s for s in every if s.agent == "CRLLK-C"]
+    assert all(s.extra == ("action=stoppable",) for s in continuous)
+    assert continuous[0].directory(Path("r")).name == "CRLLK-C-stoppable-a0.5-seed0"
+    assert all(s.extra == () for s in every if s.agent != "CRLLK-C")
     narrowed = traffic_specs(Settings(seeds=(0,), crllk_seeds=(0,), agents=("CRLLK-D", "PPO-C")))
     assert [(s.agent, s.task) for s in narrowed] == [("CRLLK-D", t) for t in TRAFFIC_TASKS]
 

@@ -10,7 +10,12 @@ from torchrl.envs.utils import check_env_specs
 
 import crllk
 from crllk.rl.rollout import run_episodes
-from crllk.tasks.actions import drive_turn_duty, duty_to_action, velocity_steering_duty
+from crllk.tasks.actions import (
+    action_duty,
+    drive_turn_duty,
+    duty_to_action,
+    velocity_steering_duty,
+)
 from crllk.tasks.teacher import Teacher
 
 
@@ -35,6 +40,17 @@ def test_continuous_teacher_inverts_the_mappings(action):
         duty_to_action("duckietown", np.array(velocity_steering_duty(*small))), small,
         atol=1e-12)
     assert np.all(np.abs(duty_to_action("continuous", np.array([1.0, -1.0]))) <= 1.0)
+
+
+@pytest.mark.parametrize("action", [(0.0, 0.0), (-1.0, 0.3), (0.9, -1.0)])
+def test_the_stoppable_teacher_inverts_its_mapping(action):
+    """duty_to_action undoes the stoppable mapping, whose velocity -1 is a mean duty of 0 and
+    +1 the continuous one's largest."""
+    duty = drive_turn_duty(*action, least=0.0)
+    np.testing.assert_allclose(duty_to_action("stoppable", np.array(duty)), action, atol=1e-12)
+    assert action_duty("stoppable", (-1.0, 0.0)) == (0.0, 0.0)
+    assert action_duty("stoppable", (1.0, 0.2)) == action_duty("continuous", (1.0, 0.2))
+    assert action_duty("continuous", (0.3, -0.5)) == drive_turn_duty(0.3, -0.5)
 
 
 @pytest.mark.parametrize("action", ["discrete", "continuous"])

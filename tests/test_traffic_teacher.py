@@ -163,10 +163,11 @@ def test_follower_waits_for_a_crossing_pedestrian_and_passes_after(load):
 @pytest.mark.parametrize("ahead", [0.3, 0.4, 0.5])
 def test_continuous_actions_cannot_wait_for_a_duckie_crossing_close_ahead(load, ahead):
     """A duckie walks into the robot's lane from its right ``ahead`` (m) in front, at 0.08
-    m/s: the follower answering in wheel duties stops and lets it cross; answering in the
-    nearest continuous actions, whose least velocity still drives forward, it creeps into the
-    duckie. Why the continuous teacher collides on pedestrian_loop."""
-    for action in ("duty", "continuous"):
+    m/s: the follower answering in wheel duties, or in the nearest stoppable actions, stops
+    and lets it cross; answering in the nearest continuous actions, whose least velocity still
+    drives forward, it creeps into the duckie. Why the continuous teacher collides on
+    pedestrian_loop."""
+    for action in ("duty", "stoppable", "continuous"):
         env = load("pedestrian_loop", seed=0)
         env.reset()
         crossing_scene(env, 1, 0.0, 0.08, env.task.traffic.crossings[0].centre[0] + ahead)
@@ -174,13 +175,13 @@ def test_continuous_actions_cannot_wait_for_a_duckie_crossing_close_ahead(load, 
         speeds = []
         for _ in range(400):
             duty = follower.duty(env.physics, env.task.movers)
-            if action == "continuous":
+            if action != "duty":
                 duty = np.array(action_duty(action, duty_to_action(action, duty)))
             ts = env.step(duty)
             speeds.append(env.physics.forward_speed())
             if ts.last():
                 break
-        if action == "duty":
+        if action != "continuous":
             assert env.task.outcome.termination is None and min(speeds) < 0.01
         else:
             assert env.task.outcome.termination == "collision" and env.task.hit_mover == 0

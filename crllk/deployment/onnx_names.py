@@ -7,7 +7,7 @@ METADATA_PREFIX = "crllk."
 """Prefix of the metadata keys (``crllk.observation``, ``crllk.supersample``, ...)."""
 OBSERVATIONS = ("pixels", "state")
 """What a policy may read (``crllk.observation``)."""
-EXPORTABLE_ACTIONS = ("discrete", "continuous", "duckietown")
+EXPORTABLE_ACTIONS = ("discrete", "continuous", "stoppable", "duckietown")
 """The action spaces whose policies export (``crllk.action``)."""
 
 __all__ = ["EXPORTABLE_ACTIONS", "INPUT", "METADATA_PREFIX", "OBSERVATIONS", "OUTPUT"]

@@ -42,14 +42,15 @@ class DeployedPolicy(nn.Module):
             return self.discrete_duties[index[0]]
         loc, _ = self.network(batch)
         velocity, steering = torch.tanh(loc[0]).clamp(-1.0, 1.0).unbind(-1)
-        if self.action == "continuous":
-            return drive_turn_duties(velocity, steering)
+        if self.action in actions.LEAST_MEAN_DUTY:
+            return drive_turn_duties(velocity, steering, actions.LEAST_MEAN_DUTY[self.action])
         return velocity_steering_duties(velocity, steering)
 
 
-def drive_turn_duties(velocity: torch.Tensor, steering: torch.Tensor) -> torch.Tensor:
+def drive_turn_duties(velocity: torch.Tensor, steering: torch.Tensor,
+                      least: float = actions.MIN_MEAN_DUTY) -> torch.Tensor:
     """:func:`crllk.tasks.actions.drive_turn_duty` on tensors."""
-    low, high = actions.MIN_MEAN_DUTY, actions.MAX_MEAN_DUTY
+    low, high = least, actions.MAX_MEAN_DUTY
     mean = low + 0.5 * (velocity + 1.0) * (high - low)
     half_difference = 0.5 * steering * actions.MAX_DUTY_DIFFERENCE
     return torch.stack([mean - half_difference, mean + half_difference])

@@ -42,17 +42,29 @@ TRAFFIC_TASKS = {
 """The tasks and what each puts to the agent."""
 TRAFFIC_AGENTS = ("CRLLK-D", "PPO-D", "CRLLK-C")
 """Learned multipliers against fixed weights with the paper's discrete actions, and learned
-multipliers with continuous actions, which can slow down behind traffic."""
-TEACHER_ACTIONS = ("discrete", "continuous")
+multipliers with continuous actions that can stand still (``action=stoppable``, run
+directories ``CRLLK-C-stoppable-...``): a robot that cannot stop runs into a duckie crossing
+close ahead."""
+STOPPABLE = RunSpec("CRLLK-C", "", 0, extra=("action=stoppable",), tag="-stoppable")
+"""What the CRLLK-C runs of the traffic tasks change: their action type and directory."""
+TEACHER_ACTIONS = ("discrete", "continuous", "stoppable")
 """The action types the scripted teacher answers in for the table's reference rows."""
 
 
 def traffic_specs(settings: Settings, tasks: Sequence[str] = tuple(TRAFFIC_TASKS)
                   ) -> list[RunSpec]:
     """Every agent of :data:`TRAFFIC_AGENTS` that ``--agents`` keeps on every task, with its
-    training seeds (three for the CRLLK agents, two for the fixed-weight baseline)."""
-    return [RunSpec(agent, task, seed) for task in tasks for agent in TRAFFIC_AGENTS
+    training seeds (three for the CRLLK agents, two for the fixed-weight baseline); CRLLK-C
+    with :data:`STOPPABLE` actions."""
+    return [RunSpec(agent, task, seed, extra=STOPPABLE.extra, tag=STOPPABLE.tag)
+            if agent == STOPPABLE.agent else RunSpec(agent, task, seed)
+            for task in tasks for agent in TRAFFIC_AGENTS
             if agent in settings.agents for seed in agent_seeds(settings, agent)]
+
+
+def agent_label(spec: RunSpec) -> str:
+    """An agent's name in the traffic table: with its runs' tag (``CRLLK-C-stoppable``)."""
+    return f"{spec.agent}{spec.tag}"
 
 
 def traffic(settings: Settings) -> list[Path]:
@@ -94,8 +106,8 @@ def traffic_document(outcome: Outcome, settings: Settings,
     tasks: dict[str, Any] = {}
     for task in dict.fromkeys(s.task for s in outcome.documents):
         agents = {}
-        for agent in dict.fromkeys(s.agent for s in outcome.documents if s.task == task):
-            specs = [s for s in outcome.documents if s.task == task and s.agent == agent]
+        for agent in dict.fromkeys(agent_label(s) for s in outcome.documents if s.task == task):
+            specs = [s for s in outcome.documents if s.task == task and agent_label(s) == agent]
             entry = agent_entry([outcome.documents[s] for s in specs])
             if all(s in outcome.modes for s in specs):
                 entry["mode"] = agent_entry([outcome.modes[s] for s in specs])
@@ -158,7 +170,8 @@ def traffic_markdown(document: Mapping[str, Any]) -> str:
     lines = [f"# {document['title']}", "",
              "CRLLK-D (multipliers learned by dual ascent), PPO-D (the same costs at fixed "
              "weights), both with the paper's three discrete actions, none of which stops, and "
-             "CRLLK-C (continuous actions, which can slow down) from the robot's camera on "
+             "CRLLK-C-stoppable (continuous actions that can stand still) from the robot's "
+             "camera on "
              "tasks with moving agents. Each row is one "
              "training run's test evaluation: every constraint's metric with its 95 % "
              "interval (✓ within its threshold, ✗ with the excess), J_R (m), then the "
@@ -203,5 +216,6 @@ def traffic_markdown(document: Mapping[str, Any]) -> str:
     return "\n".join(lines)
 
 
-__all__ = ["TEACHER_ACTIONS", "TRAFFIC_AGENTS", "TRAFFIC_TASKS", "agent_entry", "run_cells",
+__all__ = ["STOPPABLE", "TEACHER_ACTIONS", "TRAFFIC_AGENTS", "TRAFFIC_TASKS", "agent_entry",
+           "agent_label", "run_cells",
            "teacher_entry", "traffic", "traffic_document", "traffic_markdown", "traffic_specs"]

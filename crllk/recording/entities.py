@@ -66,6 +66,7 @@ def entity_paths(constraints: Sequence[Constraint]) -> tuple[str, ...]:
 
 ACTION_ENTITY_PATHS = {"discrete": ("action/index",),
                        "continuous": ("action/velocity", "action/steering"),
+                       "stoppable": ("action/velocity", "action/steering"),
                        "duckietown": ("action/velocity", "action/steering"),
                        "duty": ("action/duty_left", "action/duty_right")}
 """The action's scalar paths per action type (discrete: 0 left, 1 right, 2 straight)."""

@@ -216,8 +216,8 @@ def make_actor(observation: str, observation_shape: Sequence[int], action: str,
         module = TensorDictModule(body(num_actions), in_keys=in_keys, out_keys=["logits"])
         return ProbabilisticActor(module, in_keys=["logits"], spec=action_spec,
                                   distribution_class=Categorical, return_log_prob=True)
-    if action not in ("continuous", "duckietown"):
-        raise ValueError("action must be 'discrete', 'continuous' or 'duckietown', "
+    if action not in ("continuous", "stoppable", "duckietown"):
+        raise ValueError("action must be 'discrete', 'continuous', 'stoppable' or 'duckietown', "
                          f"got {action!r}")
     action_dim = int(action_spec.shape[-1])
     net = GaussianParams(body(action_dim), action_dim, config.initial_log_std)

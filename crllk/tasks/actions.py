@@ -8,6 +8,8 @@ Action types:
   :data:`MAX_MEAN_DUTY`, so the robot always moves forward and cannot stand still by
   alternating signs; steering sets the duty difference up to :data:`MAX_DUTY_DIFFERENCE`,
   which reaches the yaw rates of the discrete turns and more;
+- ``stoppable``: as ``continuous``, but velocity -1 stands still (mean duty 0 up to
+  :data:`MAX_MEAN_DUTY`): for traffic, where a robot must be able to wait;
 - ``duckietown``: (velocity, steering) in [-1, 1]^2 through the Duckietown inverse kinematics
   (:func:`velocity_steering_duty`), as the original code drove the robot. Through the DB18
   motor model it turns at most about 0.45 rad/s, and not at all once the velocity saturates the
@@ -25,10 +27,10 @@ import numpy as np
 from crllk.sim.constants import WHEEL_DISTANCE, WHEEL_RADIUS
 from crllk.sim.motor import clip_duty
 
-ACTIONS = ("discrete", "continuous", "duckietown", "duty")
+ACTIONS = ("discrete", "continuous", "stoppable", "duckietown", "duty")
 """Action types: 3 discrete duty pairs; (velocity, steering) in [-1, 1]^2 as a drive and a
-turn, or through the Duckietown inverse kinematics, as the original; raw wheel duty cycles
-(left, right) in [-1, 1]."""
+turn (never standing still, or able to), or through the Duckietown inverse kinematics, as the
+original; raw wheel duty cycles (left, right) in [-1, 1]."""
 
 _DISCRETE = ((0.04, 0.4), (0.4, 0.04), (0.3, 0.3))
 DISCRETE_DUTIES = np.array(_DISCRETE)
@@ -46,6 +48,8 @@ MAX_MEAN_DUTY = 0.6
 MAX_DUTY_DIFFERENCE = 0.5
 """Right minus left duty of ``continuous`` steering +1 (1.9 rad/s steady under the DB18 model;
 the discrete turns differ by 0.36)."""
+LEAST_MEAN_DUTY = {"continuous": MIN_MEAN_DUTY, "stoppable": 0.0}
+"""Mean wheel duty of velocity -1 for the drive-and-turn action types."""
 
 
 def _clip(value: float, limit: float = 1.0) -> float:
@@ -75,14 +79,16 @@ def velocity_steering_duty(velocity: float, steering: float) -> tuple[float, flo
     return _clip(duty_left, LIMIT), _clip(duty_right, LIMIT)
 
 
-def drive_turn_duty(velocity: float, steering: float) -> tuple[float, float]:
-    """``continuous`` action (velocity, steering) in [-1, 1]^2 to duty (left, right).
+def drive_turn_duty(velocity: float, steering: float,
+                    least: float = MIN_MEAN_DUTY) -> tuple[float, float]:
+    """``continuous`` action (velocity, steering) in [-1, 1]^2 to duty (left, right)
+    (``stoppable`` with ``least`` 0).
 
-    Mean duty m = MIN + (velocity + 1) / 2 * (MAX - MIN), difference d = steering * MAX_DIFF
-    (positive turns left), duty = (m - d / 2, m + d / 2).
+    Mean duty m = least + (velocity + 1) / 2 * (MAX - least), difference
+    d = steering * MAX_DIFF (positive turns left), duty = (m - d / 2, m + d / 2).
     """
     velocity, steering = _clip(float(velocity)), _clip(float(steering))
-    mean = MIN_MEAN_DUTY + 0.5 * (velocity + 1.0) * (MAX_MEAN_DUTY - MIN_MEAN_DUTY)
+    mean = least + 0.5 * (velocity + 1.0) * (MAX_MEAN_DUTY - least)
     half_difference = 0.5 * steering * MAX_DUTY_DIFFERENCE
     return mean - half_difference, mean + half_difference
 
@@ -96,7 +102,8 @@ def duty_to_action(action_type: str, duty: np.ndarray) -> np.ndarray:
 
     - ``discrete``: the turn whose duty difference is nearest (left above half a turn's
       difference, right below minus half, straight between);
-    - ``continuous``: inverts :func:`crllk.tasks.actions.drive_turn_duty`, clipped to the box;
+    - ``continuous`` and ``stoppable``: inverts :func:`crllk.tasks.actions.drive_turn_duty`,
+      clipped to the box;
     - ``duckietown``: inverts the Duckietown inverse kinematics, clipped to the box;
     - ``duty``: the duties.
     """
@@ -108,8 +115,9 @@ def duty_to_action(action_type: str, duty: np.ndarray) -> np.ndarray:
         if difference < -_TURN_DIFFERENCE / 2:
             return np.array(1)
         return np.array(2)
-    if action_type == "continuous":
-        velocity = 2.0 * (mean - MIN_MEAN_DUTY) / (MAX_MEAN_DUTY - MIN_MEAN_DUTY) - 1.0
+    if action_type in LEAST_MEAN_DUTY:
+        least = LEAST_MEAN_DUTY[action_type]
+        velocity = 2.0 * (mean - least) / (MAX_MEAN_DUTY - least) - 1.0
         steering = difference / MAX_DUTY_DIFFERENCE
     elif action_type == "duckietown":
         scale = WHEEL_RADIUS * MOTOR_CONSTANT / (GAIN * LIMIT)
@@ -129,6 +137,8 @@ def action_duty(action_type: str, action) -> tuple[float, float]:
     pair = np.asarray(action, dtype=np.float64).reshape(2).tolist()
     if action_type == "continuous":
         return drive_turn_duty(*pair)
+    if action_type == "stoppable":
+        return drive_turn_duty(*pair, least=0.0)
     if action_type == "duckietown":
         return velocity_steering_duty(*pair)
     if action_type == "duty":
