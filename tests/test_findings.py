@@ -298,3 +298,49 @@ def test_the_cost_discount_trial_rows_are_its_evaluations():
         assert f"| {label} | {cell(sampled)} | {cell(mode)} | {lam:.1f} |" in FINDINGS
     config = (root / "CRLLK-D-costgamma99-a0.5-seed0" / "config.yaml").read_text()
     assert "cost_gamma: 0.99" in config
+
+
+def test_the_cost_discount_rows_at_400_episodes_are_their_evaluations():
+    """The 400-episode table of the cost-discount trial: each run's ``val400`` and
+    ``val400-mode`` evaluations (validation seed, 400 episodes), all episodes and the blocked
+    direction; and the prose's counts: sampled collisions in 800 episodes with and without the
+    cost discount, seed 0's modes, seed 1's mode over α1, and how many hit the curve duckie."""
+    root = REPO / "results/runs/pixels/obstacle_loop"
+
+    def cell(document: dict) -> str:
+        summary, episodes = document["summary"], document["episodes"]
+        blocked = document["breakdown"]["by_direction"]["intended"]
+        hits = int(sum(e["cost_collision"] for e in episodes))
+        return (f"{summary['J_clane']:.3f} / {summary['J_coll']:.4f} ({hits} of "
+                f"{len(episodes)}), blocked {blocked['J_clane']:.3f} / {blocked['J_coll']:.3f}")
+
+    collisions, by_object = {}, {}
+    for label, run in (("default, seed 0", "CRLLK-D-a0.5-seed0"),
+                       ("default, seed 1", "CRLLK-D-a0.5-seed1"),
+                       ("`ppo.cost_gamma=0.99`, seed 0", "CRLLK-D-costgamma99-a0.5-seed0"),
+                       ("`ppo.cost_gamma=0.99`, seed 1", "CRLLK-D-costgamma99-a0.5-seed1")):
+        sampled, mode = (json.loads((root / run / f"{name}.json").read_text())
+                         for name in ("val400", "val400-mode"))
+        for document, deterministic in ((sampled, False), (mode, True)):
+            assert document["evaluation"]["seed"] == 1_000_000
+            assert document["evaluation"]["episodes"] == 400
+            assert document["evaluation"]["deterministic"] is deterministic
+        assert f"| {label} | {cell(sampled)} | {cell(mode)} |" in FINDINGS
+        collisions[run] = [int(sum(e["cost_collision"] for e in d["episodes"]))
+                           for d in (sampled, mode)]
+        for document in (sampled, mode):
+            for name, count in document["breakdown"]["collisions_by_object"].items():
+                by_object[name] = by_object.get(name, 0) + count
+    text = " ".join(FINDINGS.split())
+    trial = [collisions[f"CRLLK-D-costgamma99-a0.5-seed{s}"] for s in (0, 1)]
+    default = [collisions[f"CRLLK-D-a0.5-seed{s}"] for s in (0, 1)]
+    assert f"({sum(t[0] for t in trial)} collisions in 800 episodes against " \
+           f"{sum(d[0] for d in default)})" in text
+    assert f"seed 0's mode collides {trial[0][1]} times where the default's collides once" \
+        in text and default[0][1] == 1
+    seed1 = json.loads((root / "CRLLK-D-costgamma99-a0.5-seed1" / "val400-mode.json").read_text())
+    assert seed1["summary"]["J_clane"] > 0.5
+    assert f"beyond α1 ({seed1['summary']['J_clane']:.3f} dm)" in text
+    total = sum(by_object.values())
+    assert f"Of the {total} episodes of the eight evaluations that ended on an obstacle, " \
+           f"{by_object['3 duckie (0.88, 0.88)']} ended on the duckie in the centre" in text
