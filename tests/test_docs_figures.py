@@ -283,8 +283,9 @@ def test_the_traffic_sentence_is_what_the_runs_show():
     """In short's traffic sentence: on both tasks every run of both discrete agents misses α2
     on the test seed; CRLLK-D's λ_coll ends above PPO-D's fixed collision weight on every run
     while its λ_lane and λ_head end near zero (below 0.1, where PPO-D keeps 1); the scripted
-    teacher answering in the same discrete actions collides too; CRLLK-D's mean J_coll is within
-    a quarter either way of PPO-D's ("about as often")."""
+    teacher answering in the same discrete actions collides too, in continuous actions still
+    hits crossing duckies, and in stoppable actions holds α2 on both tasks; CRLLK-D's mean
+    J_coll is within a quarter either way of PPO-D's ("about as often")."""
     document = json.loads((REPO / "results/pixels/traffic.json").read_text())
     text = " ".join(page("README.md").split())
     assert "neither discrete agent holds α2 on either task, on any seed" in text
@@ -299,6 +300,12 @@ def test_the_traffic_sentence_is_what_the_runs_show():
             assert all(m.get(name, 0.0) < 0.1 for m in crllk["multipliers"]), (task, name)
             assert all(m.get(name, 1.0) == 1.0 for m in ppo["multipliers"]), (task, name)
         assert block["teacher"]["discrete"]["J_coll"]["values"][0] > 0.0, task
+        assert block["teacher"]["stoppable"]["J_coll"]["values"][0] <= bound, task
         ratio = (sum(crllk["J_coll"]["values"]) / len(crllk["J_coll"]["values"])) / (
             sum(ppo["J_coll"]["values"]) / len(ppo["J_coll"]["values"]))
         assert 0.75 <= ratio <= 1.0 / 0.75, (task, ratio)
+    pedestrians = document["tasks"]["pedestrian_loop"]
+    assert pedestrians["teacher"]["continuous"]["J_coll"]["values"][0] > \
+        pedestrians["thresholds"]["collision"]
+    assert "answering in them, the teacher still hits crossing duckies" in text
+    assert "(`action=stoppable`), it holds α2 on both tasks" in text
