@@ -707,6 +707,9 @@ def test_fleet_at_a_tiny_budget(tmp_path):
     text = (results / "fleet.md").read_text()
     assert text == fleet_markdown(document)
     assert "| CRLLK-D | alone | 0 |" in text and "| PPO-D | fleet | 0 |" in text
+    # the invocation's wall time counts its fleet evaluations, not only training and testing
+    assert document["evaluations_made"] >= 2 * len(FLEET_AGENTS)
+    assert document["wall_s"] > 0.0
 
 
 def test_fleet_markdown_worked_example():

@@ -12,6 +12,7 @@ judged per robot-episode, and what each robot's collisions hit.
 from __future__ import annotations
 
 import json
+import time
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -84,6 +85,7 @@ def _evaluate_fleet(run_dir: Path, episodes: int, seed: int) -> None:
 def fleet(settings: Settings) -> list[Path]:
     """Trains what is missing, makes the test and fleet evaluations not yet made, writes
     ``fleet.json`` and ``fleet.md``."""
+    started = time.perf_counter()
     specs = fleet_specs(settings)
     outcome = train_and_evaluate(specs, settings)
     root = settings.runs_root
@@ -104,7 +106,8 @@ def fleet(settings: Settings) -> list[Path]:
     document = {"title": f"Every robot driven by the policy ({settings.obs})",
                 "settings": {**settings_dict(settings), "robots": FLEET_ROBOTS,
                              "fleet_episodes": fleet_episodes(settings)},
-                **invocation(outcome), "evaluations_made": outcome.evaluated + len(missing),
+                **invocation(outcome), "wall_s": time.perf_counter() - started,
+                "evaluations_made": outcome.evaluated + len(missing),
                 "task": FLEET_TASK, "thresholds": dict(first["thresholds"]), "agents": agents}
     return write_documents(settings, "fleet", document, fleet_markdown(document))
 
