@@ -712,6 +712,17 @@ def test_fleet_at_a_tiny_budget(tmp_path):
     assert document["wall_s"] > 0.0
 
 
+def test_fleet_without_its_agents_fails_clearly(tmp_path):
+    """``experiments fleet --agents CRLLK-C``: none of the fleet's agents, a one-line error."""
+    completed = subprocess.run(
+        [sys.executable, "-m", "crllk.experiments", "fleet", "--agents", "CRLLK-C",
+         "--runs-root", str(tmp_path / "runs"), "--results", str(tmp_path / "results")],
+        cwd=REPO, capture_output=True, text=True, timeout=300)
+    assert completed.returncode == 2
+    assert "--agents: fleet drives CRLLK-D or PPO-D" in completed.stderr
+    assert "Traceback" not in completed.stderr
+
+
 def test_fleet_markdown_worked_example():
     """A fleet table's rows from a hand-made document: the run alone and in the fleet, each
     robot's J_coll in the fleet row only."""

@@ -110,7 +110,7 @@ def test_robots_driving_head_on_both_collide_with_each_other():
                                     arrange=face_to_face)
     env.close()
     assert result.terminations == ["collision", "collision"]
-    assert [e.length for e in result.episodes] < [30, 30]
+    assert all(e.length < 30 for e in result.episodes)
     assert hit_robots == [1, 0]
     assert result.hit_movers == [0, 0]
     assert [e.costs["collision"] for e in result.episodes] == [1.0, 1.0]
@@ -120,6 +120,28 @@ def min_gap(env) -> float:
     """The smallest gap (m) between two robots' footprints."""
     boxes = [duckiebot_box(*physics.pose()) for physics in env.physics]
     return min(footprint_gap(a, b) for k, a in enumerate(boxes) for b in boxes[k + 1:])
+
+
+def across_the_lane_ahead(env) -> None:
+    """Robot 1 0.2 m ahead of robot 0, across its lane (it drives out of robot 0's path)."""
+    x, y, yaw = env.physics[0].pose()
+    env.physics[1].set_pose(x + 0.2 * math.cos(yaw), y + 0.2 * math.sin(yaw), yaw + math.pi / 2)
+    env.physics[1].forward()
+
+
+def test_a_robot_driven_into_ends_its_episode_too():
+    """Robot 0 drives into robot 1, which crosses its lane ahead and moves away from it: only
+    robot 0's simulation sees the contact (robot 1's shows robot 0 where it stood before the
+    step), yet both episodes end on that step with a collision, each naming the other."""
+    env, board = fleet_env(2)
+    result, hit_robots = play_fleet(env, straight, board, 1, deterministic=True,
+                                    arrange=across_the_lane_ahead)
+    env.close()
+    assert result.terminations == ["collision", "collision"]
+    assert result.episodes[0].length == result.episodes[1].length < 30
+    assert hit_robots == [1, 0]
+    assert [e.costs["collision"] for e in result.episodes] == [1.0, 1.0]
+    assert result.hit_objects == [None, None]
 
 
 def test_spawns_keep_the_robots_apart():
@@ -135,6 +157,8 @@ def test_spawns_keep_the_robots_apart():
         assert min_gap(env) >= FLEET_CLEARANCE
     env.close()
     assert crowded > 0
+    docs = " ".join((REPO / "docs/evaluation.md").read_text().split())
+    assert f"until its footprint is at least {FLEET_CLEARANCE} m from the others'" in docs
 
 
 @pytest.fixture(scope="module")

@@ -91,20 +91,32 @@ class EpisodeAccumulator:
         for name, sums in self.cost_sums.items():
             sums += costs[name]
         self.length += 1
-        finished = []
-        for i in np.flatnonzero(done):
-            length = int(self.length[i])
-            finished.append(EpisodeStats(
-                env_index=int(i), distance=float(self.distance[i]),
-                costs={c.name: float(c.episode_value(self.cost_sums[c.name][i], length))
-                       for c in self.constraints},
-                length=length, truncated=bool(truncated[i]),
-                encounter=False if encounter is None else bool(encounter[i])))
-            self.distance[i] = 0.0
-            for sums in self.cost_sums.values():
-                sums[i] = 0.0
-            self.length[i] = 0
-        return finished
+        return [self._finish(int(i), bool(truncated[i]),
+                             False if encounter is None else bool(encounter[i]))
+                for i in np.flatnonzero(done)]
+
+    def end(self, i: int, extra_costs: Mapping[str, float]) -> EpisodeStats:
+        """Ends sub-environment ``i``'s running episode at its last step, ``extra_costs`` (by
+        constraint name) added to that step's costs: an event its own simulation did not see
+        (a fleet's robot hit by another, :mod:`crllk.evaluation.fleet`)."""
+        for name, cost in extra_costs.items():
+            if name in self.cost_sums:
+                self.cost_sums[name][i] += cost
+        return self._finish(i, truncated=False, encounter=False)
+
+    def _finish(self, i: int, truncated: bool, encounter: bool) -> EpisodeStats:
+        """Sub-environment ``i``'s episode as it stands; its sums start again."""
+        length = int(self.length[i])
+        stats = EpisodeStats(
+            env_index=i, distance=float(self.distance[i]),
+            costs={c.name: float(c.episode_value(self.cost_sums[c.name][i], length))
+                   for c in self.constraints},
+            length=length, truncated=truncated, encounter=encounter)
+        self.distance[i] = 0.0
+        for sums in self.cost_sums.values():
+            sums[i] = 0.0
+        self.length[i] = 0
+        return stats
 
     def state_dict(self) -> dict[str, Any]:
         """The running sums as tensors (``distance``, ``length``, ``costs`` by constraint

@@ -8,8 +8,9 @@ robot's own metrics and whom each collision hit.
 
 The fleet is N simulations of the map stepped together (:mod:`crllk.tasks.fleet`): robot i
 drives in simulation i with full physics; the other robots are that simulation's mover
-Duckiebots, placed before every step where their own simulations have them (a control step
-late, as scripted traffic is). A fleet episode starts every robot at once, from the spawns of
+Duckiebots, placed before every step where their own simulations had them before it (so a
+contact is seen by the robot that moved into the other; a collision between two robots ends
+both robots' episodes with it). A fleet episode starts every robot at once, from the spawns of
 their simulations, drawn again for a robot until its footprint is at least
 :data:`FLEET_CLEARANCE` from those of the robots before it; each robot's episode ends on its
 own (collision, off the road, or the horizon) and the robot then leaves the road for the
@@ -43,7 +44,7 @@ from crllk.rl.rollout import EvaluationResult, Rollout
 from crllk.tasks.constraints import Constraint
 from crllk.tasks.fleet import FleetBoard, FleetTraffic
 from crllk.tasks.traffic import duckiebot_box
-from crllk.tasks.traffic_config import MIN_VEHICLE_DISTANCE, START_SPACING
+from crllk.tasks.traffic_config import MIN_VEHICLE_DISTANCE, START_SPACING, TrafficConfig
 from crllk.training.build import build_env
 from crllk.training.runs import load_actor
 
@@ -67,7 +68,8 @@ def fleet_overrides(config: TrainConfig, robots: int) -> dict[str, Any]:
     if not 2 <= robots <= MAX_ROBOTS:
         raise ConfigError("evaluate", "fleet", f"expected 2 to {MAX_ROBOTS} robots, got {robots}")
     traffic = config.task_overrides().get("traffic") or {}
-    if (traffic.get("pedestrians") or {}).get("crossings"):
+    own = load_task_traffic(config)
+    if own is not None and own.pedestrians.count:
         raise ConfigError("evaluate", "fleet", f"the task {config.task_name} has pedestrians, "
                           "which the robots' simulations cannot share")
     return {"traffic": fleet_traffic(robots, traffic)}
@@ -123,7 +125,7 @@ def evaluate_fleet(run_dir: str | Path, *, robots: int, episodes: int,
             overrides=overrides, name=name, extra={"fleet": fleet_section})
 
 
-def load_task_traffic(config: TrainConfig) -> Any:
+def load_task_traffic(config: TrainConfig) -> TrafficConfig | None:
     """The run's task's own ``traffic`` setting (None without traffic)."""
     from crllk.tasks.config import load_task_config
 
@@ -133,7 +135,7 @@ def load_task_traffic(config: TrainConfig) -> Any:
 def join_fleet(env: BatchedLaneKeepingEnv) -> FleetBoard:
     """Makes every simulation of ``env`` one robot of a fleet: its movers become the other
     robots (:class:`FleetTraffic` on a shared board). Call before the first reset."""
-    board = FleetBoard([physics.pose() for physics in env.physics])
+    board = FleetBoard([physics.pose() for physics in env.physics], [False] * env.num_envs)
     for robot, task in enumerate(env.tasks):
         if task.traffic is None:
             raise ValueError("a fleet needs simulations with one mover per other robot")
@@ -153,6 +155,7 @@ def start_apart(env: BatchedLaneKeepingEnv, board: FleetBoard,
     Raises:
         RuntimeError: when a robot cannot be placed apart in :data:`SPAWN_TRIES` spawns.
     """
+    board.active = [False] * env.num_envs  # the last episode's robots are off the road
     td = env.reset()
     for robot in range(env.num_envs):
         for _ in range(SPAWN_TRIES):
@@ -216,15 +219,27 @@ def _fleet_episode(env: BatchedLaneKeepingEnv, rollout: Rollout, board: FleetBoa
                 actions[robot].append(stepped["action"][robot].numpy().copy())
         lateral[:] += nxt["lane_lateral"].reshape(robots).abs().double().numpy()
         outside[:] += ~nxt["in_lane"].reshape(robots).numpy()
-        terminations = nxt["termination"].reshape(robots).tolist()
-        for stats in accumulator.add_transition(nxt):
+        terminations = [TERMINATIONS[t] for t in nxt["termination"].reshape(robots).tolist()]
+        finished = [s for s in accumulator.add_transition(nxt) if board.active[s.env_index]]
+        for stats in finished:
             robot = stats.env_index
-            if not board.active[robot]:
-                continue
             task = env.tasks[robot]
-            ended[robot] = (stats, TERMINATIONS[terminations[robot]], np.stack(actions[robot]),
-                            task.start_direction, task.hit_object, task.hit_mover,
+            mover = task.hit_mover if terminations[robot] == "collision" else None
+            ended[robot] = (stats, terminations[robot], np.stack(actions[robot]),
+                            task.start_direction, task.hit_object, mover,
                             float(lateral[robot] / stats.length), int(outside[robot]))
+        for stats in finished:  # a collision between two robots ends both robots' episodes
+            robot = stats.env_index
+            mover = ended[robot][5]
+            other = None if mover is None else board.robot_of_mover(robot, mover)
+            if other is None or other in ended:
+                continue
+            hit = accumulator.end(other, {"collision": 1.0})
+            ended[other] = (hit, "collision", np.stack(actions[other]),
+                            env.tasks[other].start_direction, None,
+                            board.mover_of_robot(other, robot),
+                            float(lateral[other] / hit.length), int(outside[other]))
+        for robot in ended:
             board.active[robot] = False
 
     while any(board.active):
@@ -248,5 +263,6 @@ def by_robot(episodes: list[EpisodeStats], robots: int,
 
 
 __all__ = ["FLEET_CLEARANCE", "FLEET_FILE", "MAX_ROBOTS", "by_robot", "evaluate_fleet",
-           "fleet_overrides", "fleet_traffic", "join_fleet", "play_fleet", "start_apart"]
+           "fleet_overrides", "fleet_traffic", "join_fleet", "load_task_traffic", "play_fleet",
+           "start_apart"]
 

@@ -19,6 +19,7 @@ from typing import Any
 
 from joblib import Parallel, delayed
 
+from crllk.errors import ConfigError
 from crllk.evaluation.community import FORMATS, METRICS
 from crllk.evaluation.report import format_summary
 from crllk.experiments.runs import (
@@ -87,6 +88,9 @@ def fleet(settings: Settings) -> list[Path]:
     ``fleet.json`` and ``fleet.md``."""
     started = time.perf_counter()
     specs = fleet_specs(settings)
+    if not specs:
+        raise ConfigError("experiments", "--agents",
+                          f"fleet drives {' or '.join(FLEET_AGENTS)}, got {list(settings.agents)}")
     outcome = train_and_evaluate(specs, settings)
     root = settings.runs_root
     missing = [s for s in specs if not fleet_is_current(s.directory(root), settings)]

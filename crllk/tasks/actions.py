@@ -8,8 +8,9 @@ Action types:
   :data:`MAX_MEAN_DUTY`, so the robot always moves forward and cannot stand still by
   alternating signs; steering sets the duty difference up to :data:`MAX_DUTY_DIFFERENCE`,
   which reaches the yaw rates of the discrete turns and more;
-- ``stoppable``: as ``continuous``, but velocity -1 stands still (mean duty 0 up to
-  :data:`MAX_MEAN_DUTY`): for traffic, where a robot must be able to wait;
+- ``stoppable``: as ``continuous``, but velocity -1 is a mean duty of 0 (up to
+  :data:`MAX_MEAN_DUTY`): with steering 0 the robot stands still, with steering it turns on
+  the spot; for traffic, where a robot must be able to wait;
 - ``duckietown``: (velocity, steering) in [-1, 1]^2 through the Duckietown inverse kinematics
   (:func:`velocity_steering_duty`), as the original code drove the robot. Through the DB18
   motor model it turns at most about 0.45 rad/s, and not at all once the velocity saturates the

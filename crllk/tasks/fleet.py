@@ -7,9 +7,10 @@ camera, and the other N - 1 robots are the scene's mover Duckiebots (:mod:`crllk
 placed before every step at the poses their own simulations hold (a :class:`FleetBoard` shared
 by all). Collisions, the headway signal and the movers' features then work as with scripted
 traffic (:class:`~crllk.tasks.traffic.Traffic`, whose measures this class keeps): robot i
-hitting robot j ends robot i's episode with a collision, and robot j's in its own simulation.
-A robot whose episode has ended leaves the road for the others: its mover stands
-:data:`PARKED`, beyond the camera's far plane.
+touching robot j ends robot i's episode with a collision in its simulation, and the fleet
+ends robot j's with it (:mod:`crllk.evaluation.fleet`). A robot whose episode has ended
+leaves the road for the others: its mover stands :data:`PARKED`, beyond the camera's far
+plane.
 """
 
 from __future__ import annotations
@@ -46,9 +47,15 @@ class FleetBoard:
                 for k, (pose, active) in enumerate(zip(self.poses, self.active, strict=True))
                 if k != robot]
 
-    def robot_of_mover(self, robot: int, mover: int) -> int:
+    @staticmethod
+    def robot_of_mover(robot: int, mover: int) -> int:
         """The robot that mover ``mover`` of robot ``robot``'s simulation stands for."""
         return mover if mover < robot else mover + 1
+
+    @staticmethod
+    def mover_of_robot(robot: int, other: int) -> int:
+        """The mover that stands for robot ``other`` in robot ``robot``'s simulation."""
+        return other if other < robot else other - 1
 
 
 class FleetTraffic(Traffic):
