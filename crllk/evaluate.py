@@ -46,6 +46,7 @@ from crllk.settings import (
     at_least_one,
     at_most,
     file_stem,
+    fleet_size,
     non_negative,
     one_of,
     parse_dotlist,
@@ -100,7 +101,7 @@ class EvaluateConfig:
     name: str = setting("eval", check=file_stem)
     """The result's file name in each run directory, without ``.json`` (with ``fleet``:
     ``fleet`` unless given)."""
-    fleet: int = setting(0, check=non_negative)
+    fleet: int = setting(0, check=fleet_size)
     """Robots on the map, every one driven by the run's policy from its own camera, with
     ``episodes`` fleet episodes (:mod:`crllk.evaluation.fleet`); 0: the run's one robot."""
     thresholds: dict[str, float] = field(default_factory=algo_thresholds)

@@ -47,6 +47,8 @@ MAX_EPISODES = 1_000_000
 """Most episodes one evaluation plays (over a week of simulation per evaluation)."""
 MAX_SIMULATIONS = 1024
 """Most simulations stepped together (each holds a MuJoCo model and its renderer)."""
+MAX_FLEET = 8
+"""Most robots a fleet evaluation puts on one map (:mod:`crllk.evaluation.fleet`)."""
 
 
 def spawn_seed(value: int) -> str | None:
@@ -66,6 +68,12 @@ def at_most(limit: int) -> Check:
 
 def at_least_one(value: int) -> str | None:
     return None if value >= 1 else "must be >= 1"
+
+
+def fleet_size(value: int) -> str | None:
+    """0 (no fleet: the run's one robot) or 2 to :data:`MAX_FLEET` robots."""
+    return None if value == 0 or 2 <= value <= MAX_FLEET else \
+        f"expected 0 (one robot) or 2 to {MAX_FLEET} robots, got {value}"
 
 
 def unit_interval(value: float) -> str | None:

@@ -120,8 +120,8 @@ def test_evaluate_names_an_unknown_setting(capsys):
 def test_evaluate_names_an_unknown_action_type(capsys):
     err = _one_line_error(capsys, exit_status(lambda: evaluate.main(["teacher=true",
                                                                       "action=wheels"])))
-    assert err == ("error: evaluate: action: must be one of discrete, continuous, duckietown, "
-                   "duty, got 'wheels'")
+    assert err == ("error: evaluate: action: must be one of discrete, continuous, stoppable, "
+                   "duckietown, duty, got 'wheels'")
 
 
 # ----- crllk.record and pictures of recordings -----------------------------------------------

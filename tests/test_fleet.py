@@ -184,8 +184,8 @@ def test_a_fleet_evaluation_writes_one_row_per_robot_and_episode(pixel_run):
 
 
 @pytest.mark.parametrize(("args", "message"), [
-    (["fleet=1"], "fleet: expected 2 to 8 robots, got 1"),
-    (["fleet=9"], "fleet: expected 2 to 8 robots, got 9"),
+    (["fleet=1"], "fleet: expected 0 (one robot) or 2 to 8 robots, got 1"),
+    (["fleet=9"], "fleet: expected 0 (one robot) or 2 to 8 robots, got 9"),
     (["fleet=2", "record=true"], "record: fleet evaluations are not recorded"),
 ])
 def test_bad_fleets_fail_clearly(pixel_run, args, message):

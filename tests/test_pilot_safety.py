@@ -280,7 +280,7 @@ BAD_METADATA = [
     ("observation", {"observation": "video"}, "expected one of pixels, state"),
     ("observation", {"observation": "state", "observation_shape": "[5]"},
      "a state policy has one input, observation tensor(float)"),
-    ("action", {"action": "fly"}, "expected one of discrete, continuous, duckietown"),
+    ("action", {"action": "fly"}, "expected one of discrete, continuous, stoppable, duckietown"),
 ]
 
 

@@ -41,6 +41,7 @@ from crllk.files import output_lock
 from crllk.maps.obstacles import footprint_gap
 from crllk.rl.import_probes import settle_import_probes
 from crllk.rl.rollout import EvaluationResult, Rollout
+from crllk.settings import MAX_FLEET
 from crllk.tasks.constraints import Constraint
 from crllk.tasks.fleet import FleetBoard, FleetTraffic
 from crllk.tasks.traffic import duckiebot_box
@@ -50,7 +51,7 @@ from crllk.training.runs import load_actor
 
 FLEET_FILE = "fleet"
 """The fleet evaluation's result: ``<run>/fleet.json``."""
-MAX_ROBOTS = 8
+MAX_ROBOTS = MAX_FLEET
 """The most robots a fleet evaluation puts on a map."""
 FLEET_CLEARANCE = 0.25
 """Least gap (m) between two robots' footprints when a fleet episode starts."""

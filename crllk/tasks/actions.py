@@ -136,10 +136,8 @@ def action_duty(action_type: str, action) -> tuple[float, float]:
     if action_type == "discrete":
         return discrete_duty(action if type(action) is int else np.asarray(action).item())
     pair = np.asarray(action, dtype=np.float64).reshape(2).tolist()
-    if action_type == "continuous":
-        return drive_turn_duty(*pair)
-    if action_type == "stoppable":
-        return drive_turn_duty(*pair, least=0.0)
+    if action_type in LEAST_MEAN_DUTY:
+        return drive_turn_duty(*pair, least=LEAST_MEAN_DUTY[action_type])
     if action_type == "duckietown":
         return velocity_steering_duty(*pair)
     if action_type == "duty":
