@@ -417,6 +417,7 @@ def test_distance_ahead_leaves_out_only_points_that_cannot_count():
         along = float(rng.uniform(0.0, lane.length))
         x0, y0, _ = lane.point_at(along)
         points = [(x0 + float(dx), y0 + float(dy)) for dx, dy in rng.uniform(-1.6, 1.6, (12, 2))]
+        points += [(-0.01, y0), (x0, -0.01), (dmap.width + 0.01, y0), (x0, dmap.height + 0.01)]
         half_width, reach = float(rng.uniform(0.05, 0.2)), float(rng.uniform(0.3, 1.2))
         route = Route(dmap, lane, along, reach)
         projected = [p for p in (route.project(x, y) for x, y in points)
@@ -437,10 +438,13 @@ def test_outline_is_the_footprint_without_its_repeated_corners():
     from crllk.maps.obstacles import footprint_points
     from crllk.tasks.traffic import outline
 
-    box = duckiebot_box(0.3, 0.2, 0.7)
-    points = footprint_points(box, 3)
-    assert len(outline(box)) == 9 < len(points) == 13
-    assert set(outline(box)) == set(points)
+    rng = np.random.default_rng(2)
+    for x, y, yaw in rng.uniform(-4.0, 4.0, (200, 3)):
+        for box in (duckiebot_box(x, y, yaw), pedestrian_box(x, y, yaw)):
+            points = footprint_points(box, 3)
+            assert len(points) == 13
+            assert outline(box) == list(dict.fromkeys(points))  # the same floats, in order
+            assert len(outline(box)) == 9
 
 
 def test_headway_is_the_same_measured_afresh(load):

@@ -113,15 +113,33 @@ class Route:
     def distance_within(self, x: float, y: float, half_width: float) -> float | None:
         """``project(x, y).distance`` where that point lies within ``half_width`` (m) of its
         lane's centre, else None (the same numbers, computed with less)."""
-        found = self._on_tile.get(self.map.tile_index(x, y))
-        if found is None:
-            return None
-        lane, start = found
-        along = lane.along_within(x, y, half_width)
-        if along is None:
-            return None
-        distance = start + along
-        return distance if 0.0 <= distance <= self.reach else None
+        return self.nearest_within([(x, y)], half_width)
+
+    def nearest_within(self, points: list[tuple[float, float]], half_width: float,
+                       near: tuple[float, float, float] | None = None) -> float | None:
+        """The least :meth:`distance_within` of ``points`` (None if none has one), leaving
+        out before projecting it any point farther than ``near[2]`` (m) in a straight line
+        from (``near[0]``, ``near[1]``). The route's tiles are looked up by their indices
+        directly: a point off the grid is on none of them."""
+        size, top, on_tile, reach = self.map.tile_size, self.map.rows - 1, self._on_tile, self.reach
+        near_x, near_y, limit = near if near is not None else (0.0, 0.0, math.inf)
+        limit = limit ** 2
+        floor = math.floor
+        nearest = None
+        for x, y in points:
+            if (x - near_x) ** 2 + (y - near_y) ** 2 > limit:
+                continue
+            found = on_tile.get((floor(x / size), top - floor(y / size)))
+            if found is None:
+                continue
+            lane, start = found
+            along = lane.along_within(x, y, half_width)
+            if along is None:
+                continue
+            distance = start + along
+            if 0.0 <= distance <= reach and (nearest is None or distance < nearest):
+                nearest = distance
+        return nearest
 
 
 def distance_ahead(dmap: DuckietownMap, lane: Lane, along: float,
@@ -134,17 +152,9 @@ def distance_ahead(dmap: DuckietownMap, lane: Lane, along: float,
     A point farther than ``reach + half_width`` (m) in a straight line from the start cannot
     count (the lanes' length to its projection is at least the straight line there), so it is
     left out before it is projected: the same answer, sooner."""
-    route = Route(dmap, lane, along, reach)
     start_x, start_y, _ = lane.point_at(along)
-    limit = (reach + half_width) ** 2
-    nearest = None
-    for x, y in points:
-        if (x - start_x) ** 2 + (y - start_y) ** 2 > limit:
-            continue
-        distance = route.distance_within(x, y, half_width)
-        if distance is not None and (nearest is None or distance < nearest):
-            nearest = distance
-    return nearest
+    return Route(dmap, lane, along, reach).nearest_within(
+        points, half_width, (start_x, start_y, reach + half_width))
 
 
 @dataclass(frozen=True)

@@ -98,6 +98,7 @@ class Movers:
         self.heights = np.array([C.WHEEL_RADIUS] * self.vehicles
                                 + [0.0] * (len(bodies) - self.vehicles))
         """Height (m) of each mover's body frame above the floor."""
+        self._heights: list[float] = self.heights.tolist()
         self.of_geom = np.full(model.ngeom, -1, dtype=int)
         """The mover whose collision box each geom is (-1: none)."""
         for k, body in enumerate(bodies):
@@ -105,6 +106,7 @@ class Movers:
                               model.body_geomadr[body] + model.body_geomnum[body]):
                 if model.geom_conaffinity[geom] == _MOVER_CONAFFINITY:
                     self.of_geom[geom] = k
+        self._mover_of: list[int] = self.of_geom.tolist()
 
     def __len__(self) -> int:
         return len(self.mocap)
@@ -113,21 +115,27 @@ class Movers:
         """Place mover k at ``poses[k]`` = (x, y, yaw) (m, rad) on the floor."""
         if len(poses) != len(self.mocap):
             raise ValueError(f"{len(poses)} poses for {len(self.mocap)} movers")
-        for slot, height, (x, y, yaw) in zip(self.mocap, self.heights, poses, strict=True):
-            data.mocap_pos[slot] = (x, y, height)
-            data.mocap_quat[slot] = (math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2))
+        if not poses:
+            return
+        data.mocap_pos[self.mocap] = [(x, y, height) for (x, y, _), height
+                                      in zip(poses, self._heights, strict=True)]
+        data.mocap_quat[self.mocap] = [(math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2))
+                                       for _, _, yaw in poses]
 
     def touched(self, data: mujoco.MjData, footprint: int) -> int | None:
         """The mover whose collision box touches geom ``footprint`` (the lowest index if
         several do), or None."""
         if data.ncon == 0 or not len(self.mocap):
             return None
-        contacts = data.contact
-        g1, g2 = contacts.geom1, contacts.geom2
-        hit = np.concatenate([self.of_geom[g2[g1 == footprint]],
-                              self.of_geom[g1[g2 == footprint]]])
-        hit = hit[hit >= 0]
-        return int(hit.min()) if hit.size else None
+        mover_of = self._mover_of
+        hit = [k for geom in contact_partners(data, footprint) if (k := mover_of[geom]) >= 0]
+        return min(hit) if hit else None
+
+
+def contact_partners(data: mujoco.MjData, geom: int) -> list[int]:
+    """The geoms in contact with geom ``geom`` in ``data``, one per contact (the few contacts
+    of a step read as plain integers: faster than array masks this small)."""
+    return [b if a == geom else a for a, b in data.contact.geom.tolist() if geom in (a, b)]
 
 
 def _count(model: mujoco.MjModel, prefix: str) -> int:
@@ -138,4 +146,4 @@ def _count(model: mujoco.MjModel, prefix: str) -> int:
 
 
 __all__ = ["PEDESTRIAN_HEIGHT", "PEDESTRIAN_SIZE", "SLICES", "STACKS", "Movers", "add_movers",
-           "pedestrian_name", "vehicle_name"]
+           "contact_partners", "pedestrian_name", "vehicle_name"]

@@ -20,7 +20,7 @@ from crllk.maps import DuckietownMap
 from crllk.sim import constants as C
 from crllk.sim.culling import FrustumCuller, cullable, hidden_geoms
 from crllk.sim.motor import MotorConfig, clip_duty
-from crllk.sim.movers import Movers, add_movers
+from crllk.sim.movers import Movers, add_movers, contact_partners
 from crllk.sim.scene import build_spec
 from crllk.sim.variation import (
     SceneVariation,
@@ -199,11 +199,8 @@ class Physics(dm_mujoco.Physics):
         data = self._mj_data
         if data.ncon == 0 or len(self._obstacle_geoms) == 0:
             return False
-        contacts = data.contact
-        g1, g2 = contacts.geom1, contacts.geom2
-        footprint, obstacle = self._footprint_geom, self._is_obstacle
-        return bool(np.any(((g1 == footprint) & obstacle[g2])
-                           | ((g2 == footprint) & obstacle[g1])))
+        obstacle = self._is_obstacle
+        return any(obstacle[geom] for geom in contact_partners(data, self._footprint_geom))
 
     def touched_mover(self) -> int | None:
         """The moving agent (index in :attr:`movers`: vehicles, then pedestrians) whose

@@ -252,8 +252,15 @@ class Traffic:
 
 def outline(box: MapObject) -> list[tuple[float, float]]:
     """The points (x, y) the traffic measures a footprint by: its centre, corners and edge
-    midpoints (``footprint_points(box, 3)`` without its repeated corners)."""
-    return list(dict.fromkeys(footprint_points(box, 3)))
+    midpoints, the distinct points of ``footprint_points(box, 3)`` in its order and computed as
+    it computes them."""
+    x, y, c, s = box.x, box.y, math.cos(box.yaw), math.sin(box.yaw)
+    half_length, half_width = box.length / 2, box.width / 2
+    return [(x, y)] + [(x + c * u - s * v, y + s * u + c * v)
+                       for u, v in ((-half_length, -half_width), (-half_length, half_width),
+                                    (half_length, -half_width), (0.0, -half_width),
+                                    (0.0, half_width), (-half_length, 0.0),
+                                    (half_length, 0.0), (half_length, half_width))]
 
 
 def _positions(state: dict[str, Any]) -> tuple[tuple[int, float], ...]:
