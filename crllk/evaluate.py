@@ -55,7 +55,7 @@ from crllk.settings import (
 )
 from crllk.tasks.actions import ACTIONS
 from crllk.tasks.follower import FollowerGains
-from crllk.training.run_dir import EVAL_RECORDING
+from crllk.training.run_dir import EVAL_FILE, EVAL_RECORDING, FLEET_FILE
 
 SOURCE = "evaluate"
 @dataclass
@@ -98,15 +98,26 @@ class EvaluateConfig:
     ``overrides.camera.robot_frames=true``, checked before any episode: of each run's task
     (named or a task file), its recording's, and the follower's and teacher's task; a run's
     result goes to ``<run>/<name>.json``."""
-    name: str = setting("eval", check=file_stem)
-    """The result's file name in each run directory, without ``.json`` (with ``fleet``:
-    ``fleet`` unless given)."""
+    name: str | None = setting(None, check=file_stem)
+    """The result's file name in each run directory, without ``.json`` (default: ``eval``,
+    or ``fleet`` with ``fleet``)."""
     fleet: int = setting(0, check=fleet_size)
     """Robots on the map, every one driven by the run's policy from its own camera, with
     ``episodes`` fleet episodes (:mod:`crllk.evaluation.fleet`); 0: the run's one robot."""
     thresholds: dict[str, float] = field(default_factory=algo_thresholds)
     """The follower's and teacher's constraint thresholds (``thresholds.lane=0.75``); a run
     is judged by its own ``algo.constraints``."""
+
+    @property
+    def result_name(self) -> str | None:
+        """The result's file name without ``.json``: ``name``, ``fleet`` for a fleet, or None
+        for the default ``eval.json``."""
+        return FLEET_FILE if self.name is None and self.fleet else self.name
+
+    def result_file(self, run_dir: Path) -> Path:
+        """Where the result of ``run_dir`` goes."""
+        name = self.result_name
+        return run_dir / (EVAL_FILE if name is None else f"{name}.json")
 
     def run_dirs(self) -> list[Path]:
         return [Path(r) for r in ([self.run] if self.run else []) + list(self.runs)]
@@ -121,7 +132,7 @@ class EvaluateConfig:
         for run_dir in self.run_dirs():
             if not run_dir.is_dir():
                 yield "run", f"no such run directory: {run_dir}"
-            elif problem := write_problem(run_dir / f"{self.name}.json"):
+            elif problem := write_problem(self.result_file(run_dir)):
                 yield "run", f"cannot write the result: {problem}"
             elif self.record and (problem := write_problem(run_dir / EVAL_RECORDING)):
                 yield "record", f"cannot write the recording: {problem}"
@@ -147,6 +158,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         # reported in a second or two
         import torch
 
+        from crllk.evaluation.fleet import evaluate_fleet, fleet_config
         from crllk.evaluation.report import aggregate, format_aggregate, format_summary
         from crllk.evaluation.runs import (
             check_task_overrides,
@@ -159,24 +171,23 @@ def main(argv: Sequence[str] | None = None) -> int:
         torch.set_num_threads(config.threads)
         for run_dir in config.run_dirs():  # every run's overrides checked before any work
             evaluation_config(run_dir, config.overrides)
+            if config.fleet:
+                fleet_config(run_dir, config.fleet, config.overrides)
         if config.overrides and (config.follower or config.teacher):
             check_task_overrides(config.task, config.overrides, config.overrides, SOURCE)
         documents = []
         for run_dir in config.run_dirs():
             if config.fleet:
-                from crllk.evaluation.fleet import FLEET_FILE, evaluate_fleet
-
                 documents.append(evaluate_fleet(
                     run_dir, robots=config.fleet, episodes=config.episodes,
                     deterministic=config.deterministic, seed=config.seed,
-                    overrides=config.overrides,
-                    name=FLEET_FILE if config.name == "eval" else config.name))
+                    overrides=config.overrides, name=config.result_name))
                 print(format_summary(documents[-1]), flush=True)
                 continue
             documents.append(evaluate_run(run_dir, episodes=config.episodes,
                                           deterministic=config.deterministic,
                                           seed=config.seed, num_envs=config.num_envs,
-                                          overrides=config.overrides, name=config.name))
+                                          overrides=config.overrides, name=config.result_name))
             print(format_summary(documents[-1]), flush=True)
             if config.record:
                 record_run(run_dir, episodes=config.record_episodes, seed=config.seed,

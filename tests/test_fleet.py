@@ -204,8 +204,9 @@ def test_a_fleet_without_a_run_fails_clearly():
     assert "fleet: a fleet is driven by a run's policy" in result.stderr
 
 
-def test_fleets_the_task_cannot_hold_fail_clearly(tmp_path):
-    """A map with obstacles on the road, and a state policy trained without movers."""
+def test_fleets_the_task_cannot_hold_fail_clearly(tmp_path, pixel_run):
+    """A map with obstacles on the road, and a state policy trained without movers; on the
+    command line, every run is checked before the first is evaluated."""
     from crllk.errors import ConfigError
 
     obstacles = run_in_process(tmp_path / "obstacles", 1, ["obs=state", "task=obstacle_loop"])
@@ -214,3 +215,36 @@ def test_fleets_the_task_cannot_hold_fail_clearly(tmp_path):
     plain = run_in_process(tmp_path / "plain", 1, ["obs=state"])
     with pytest.raises(ConfigError, match="a state policy trained without traffic"):
         evaluate_fleet(plain, robots=2, episodes=1)
+    result = subprocess.run([sys.executable, "-m", "crllk.evaluate", f"runs=[{pixel_run},{plain}]",
+                             "fleet=2", "episodes=1", "name=checked-first"], cwd=REPO,
+                            capture_output=True, text=True, timeout=300)
+    assert result.returncode == 2, result.stderr
+    assert "a state policy trained without traffic" in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1
+    assert not (pixel_run / "checked-first.json").exists()  # nothing played
+
+
+def test_a_map_too_crowded_for_the_fleet_fails_clearly(monkeypatch):
+    """Where a robot finds no spawn apart from the others, the fleet is refused as a setting
+    (with one try per robot, six robots on small_loop are crowded in some of eight starts)."""
+    import crllk.evaluation.fleet as fleet
+    from crllk.errors import ConfigError
+
+    monkeypatch.setattr(fleet, "SPAWN_TRIES", 1)
+    env, board = fleet_env(6, seed=3)
+    with pytest.raises(ConfigError, match=r"fleet: no spawn of robot \d keeps .* fewer robots"):
+        for _ in range(8):
+            start_apart(env, board)
+    env.close()
+
+
+def test_a_fleet_result_is_named_fleet_unless_named(tmp_path):
+    from crllk.evaluate import parse
+
+    def result(*args: str) -> str:
+        return parse([f"run={tmp_path}", *args]).result_file(tmp_path).name
+
+    assert result("fleet=2") == "fleet.json"
+    assert result("fleet=2", "name=eval") == "eval.json"
+    assert result() == "eval.json"
+    assert result("name=x") == "x.json"

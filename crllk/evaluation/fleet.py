@@ -47,10 +47,9 @@ from crllk.tasks.fleet import FleetBoard, FleetTraffic
 from crllk.tasks.traffic import duckiebot_box
 from crllk.tasks.traffic_config import MIN_VEHICLE_DISTANCE, START_SPACING, TrafficConfig
 from crllk.training.build import build_env
+from crllk.training.run_dir import FLEET_FILE
 from crllk.training.runs import load_actor
 
-FLEET_FILE = "fleet"
-"""The fleet evaluation's result: ``<run>/fleet.json``."""
 MAX_ROBOTS = MAX_FLEET
 """The most robots a fleet evaluation puts on a map."""
 FLEET_CLEARANCE = 0.25
@@ -85,6 +84,24 @@ def fleet_traffic(robots: int, traffic: Mapping[str, Any] | None = None) -> dict
                                             "distance": distance}}
 
 
+def fleet_config(run_dir: str | Path, robots: int,
+                 overrides: Mapping[str, Any] | None = None) -> TrainConfig:
+    """The run's configuration for its evaluation in a fleet of ``robots`` robots.
+
+    Raises:
+        ConfigError: for a fleet the run's task cannot hold (see :func:`fleet_overrides`) or
+            a state policy trained without traffic.
+    """
+    plain = evaluation_config(run_dir, overrides)
+    fleet = {**(overrides or {}), **fleet_overrides(plain, robots)}
+    config = evaluation_config(run_dir, fleet, workers=1)
+    if config.obs.name == "state" and load_task_traffic(plain) is None:
+        raise ConfigError(run_dir, "fleet", "a state policy trained without traffic has no "
+                          "inputs for the other robots; evaluate a pixel run or one trained "
+                          "with traffic")
+    return config
+
+
 def evaluate_fleet(run_dir: str | Path, *, robots: int, episodes: int,
                    deterministic: bool = False, seed: int | None = None,
                    overrides: Mapping[str, Any] | None = None,
@@ -97,13 +114,7 @@ def evaluate_fleet(run_dir: str | Path, *, robots: int, episodes: int,
             a state policy trained without traffic.
     """
     settle_import_probes()
-    plain = evaluation_config(run_dir, overrides)
-    fleet = {**(overrides or {}), **fleet_overrides(plain, robots)}
-    config = evaluation_config(run_dir, fleet, workers=1)
-    if config.obs.name == "state" and load_task_traffic(plain) is None:
-        raise ConfigError(run_dir, "fleet", "a state policy trained without traffic has no "
-                          "inputs for the other robots; evaluate a pixel run or one trained "
-                          "with traffic")
+    config = fleet_config(run_dir, robots, overrides)
     seed = config.eval.seed if seed is None else seed
     with output_lock(result_path(run_dir, name)):
         env = build_env(config, num_envs=robots, seed=seed)
@@ -154,7 +165,8 @@ def start_apart(env: BatchedLaneKeepingEnv, board: FleetBoard,
     acts on first (every robot on the road, in every camera).
 
     Raises:
-        RuntimeError: when a robot cannot be placed apart in :data:`SPAWN_TRIES` spawns.
+        ConfigError: when a robot cannot be placed apart in :data:`SPAWN_TRIES` spawns (too
+            many robots for the map).
     """
     board.active = [False] * env.num_envs  # the last episode's robots are off the road
     td = env.reset()
@@ -168,8 +180,9 @@ def start_apart(env: BatchedLaneKeepingEnv, board: FleetBoard,
             mask[robot] = True
             td = env.reset(td.set("_reset", mask))
         else:
-            raise RuntimeError(f"no spawn of robot {robot} keeps {FLEET_CLEARANCE} m from the "
-                               f"others in {SPAWN_TRIES} tries: fewer robots, or a larger map")
+            raise ConfigError("evaluate", "fleet", f"no spawn of robot {robot} keeps "
+                              f"{FLEET_CLEARANCE} m from the others in {SPAWN_TRIES} tries: "
+                              "fewer robots, or a larger map")
     if arrange is not None:
         arrange(env)
     board.poses = [physics.pose() for physics in env.physics]
@@ -263,7 +276,7 @@ def by_robot(episodes: list[EpisodeStats], robots: int,
     return out
 
 
-__all__ = ["FLEET_CLEARANCE", "FLEET_FILE", "MAX_ROBOTS", "by_robot", "evaluate_fleet",
+__all__ = ["FLEET_CLEARANCE", "MAX_ROBOTS", "by_robot", "evaluate_fleet", "fleet_config",
            "fleet_overrides", "fleet_traffic", "join_fleet", "load_task_traffic", "play_fleet",
            "start_apart"]
 

@@ -34,6 +34,10 @@ RUN_LOCK = ".lock"
 """The trainer's lock file in a run directory."""
 EVAL_RECORDING = Path("recordings") / "eval.rrd"
 """Where ``python -m crllk.evaluate record=true`` records a run's episodes, in its directory."""
+EVAL_FILE = "eval.json"
+"""``python -m crllk.evaluate``'s result in a run directory."""
+FLEET_FILE = "fleet"
+"""The name (without ``.json``) of a fleet evaluation's result in a run directory."""
 RUN_FOLDERS = ("checkpoints", "recordings")
 """The folders the commands write in inside a run directory."""
 

@@ -29,11 +29,10 @@ from crllk.training.checkpoints import (
     policy_state,
     save_checkpoint,
 )
-from crllk.training.run_dir import check_run_folders
+from crllk.training.run_dir import EVAL_FILE, check_run_folders
 
 CONFIG_FILE = "config.yaml"
 CHECKPOINT_FILE = Path("checkpoints") / "last.pt"
-EVAL_FILE = "eval.json"
 
 
 def load_run_config(run_dir: str | Path) -> TrainConfig:
