@@ -35,6 +35,7 @@ from crllk.settings import (
     tcp_port,
     unit_interval,
 )
+from crllk.tasks.actions import POLICY_ACTIONS
 from crllk.tasks.follower import FollowerGains
 
 SOURCE = "override"
@@ -107,7 +108,7 @@ class AlgoConfig:
 class ActionConfig:
     """The action space (``action=discrete|continuous|stoppable|duckietown``)."""
 
-    name: str = setting(check=one_of("discrete", "continuous", "stoppable", "duckietown"))
+    name: str = setting(check=one_of(*POLICY_ACTIONS))
     baseline_collision_weight: float = setting(check=non_negative)
     """The fixed collision weight of the PPO baseline with this action space."""
 

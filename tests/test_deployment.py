@@ -301,3 +301,11 @@ def test_parity_of_camera_frames_and_simulator_images(pixel_policy, capsys):
     assert exit_status(lambda: deploy.main(["--policy", str(pixel_policy), "--parity",
                                             "small_loop", "--parity-frames", "5"])) == 0
     assert "small_loop: the same command on" in capsys.readouterr().out
+
+
+def test_every_policy_action_type_exports():
+    """The pilot's list (kept free of imports for the robot) names every policy action type."""
+    from crllk.deployment.onnx_names import EXPORTABLE_ACTIONS
+    from crllk.tasks.actions import POLICY_ACTIONS
+
+    assert EXPORTABLE_ACTIONS == POLICY_ACTIONS

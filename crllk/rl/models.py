@@ -28,6 +28,7 @@ from torchrl.data import TensorSpec
 from torchrl.modules import ProbabilisticActor, TanhNormal, ValueOperator
 
 from crllk.rl.model_config import ModelConfig
+from crllk.tasks.actions import GAUSSIAN_ACTIONS, POLICY_ACTIONS
 
 PIXEL_SCALE = 1.0 / 255.0  # uint8 camera value -> [0, 1]
 
@@ -216,9 +217,8 @@ def make_actor(observation: str, observation_shape: Sequence[int], action: str,
         module = TensorDictModule(body(num_actions), in_keys=in_keys, out_keys=["logits"])
         return ProbabilisticActor(module, in_keys=["logits"], spec=action_spec,
                                   distribution_class=Categorical, return_log_prob=True)
-    if action not in ("continuous", "stoppable", "duckietown"):
-        raise ValueError("action must be 'discrete', 'continuous', 'stoppable' or 'duckietown', "
-                         f"got {action!r}")
+    if action not in GAUSSIAN_ACTIONS:
+        raise ValueError(f"action must be one of {', '.join(POLICY_ACTIONS)}, got {action!r}")
     action_dim = int(action_spec.shape[-1])
     net = GaussianParams(body(action_dim), action_dim, config.initial_log_std)
     module = TensorDictModule(net, in_keys=in_keys, out_keys=["loc", "scale"])

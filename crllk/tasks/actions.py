@@ -28,7 +28,12 @@ import numpy as np
 from crllk.sim.constants import WHEEL_DISTANCE, WHEEL_RADIUS
 from crllk.sim.motor import clip_duty
 
-ACTIONS = ("discrete", "continuous", "stoppable", "duckietown", "duty")
+POLICY_ACTIONS = ("discrete", "continuous", "stoppable", "duckietown")
+"""The action types a policy acts in (all but raw duties)."""
+GAUSSIAN_ACTIONS = ("continuous", "stoppable", "duckietown")
+"""The policy action types of two numbers in [-1, 1], drawn from a Gaussian policy."""
+
+ACTIONS = (*POLICY_ACTIONS, "duty")
 """Action types: 3 discrete duty pairs; (velocity, steering) in [-1, 1]^2 as a drive and a
 turn (never standing still, or able to), or through the Duckietown inverse kinematics, as the
 original; raw wheel duty cycles (left, right) in [-1, 1]."""
