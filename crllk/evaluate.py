@@ -102,8 +102,9 @@ class EvaluateConfig:
     """The result's file name in each run directory, without ``.json`` (default: ``eval``,
     or ``fleet`` with ``fleet``)."""
     fleet: int = setting(0, check=fleet_size)
-    """Robots on the map, every one driven by the run's policy from its own camera, with
-    ``episodes`` fleet episodes (:mod:`crllk.evaluation.fleet`); 0: the run's one robot."""
+    """Robots on the map, every one driven by the run's policy from its own observations (a
+    pixel run's: its own camera), with ``episodes`` fleet episodes
+    (:mod:`crllk.evaluation.fleet`); 0: the run's one robot."""
     thresholds: dict[str, float] = field(default_factory=algo_thresholds)
     """The follower's and teacher's constraint thresholds (``thresholds.lane=0.75``); a run
     is judged by its own ``algo.constraints``."""

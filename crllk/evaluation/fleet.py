@@ -1,10 +1,11 @@
 """Every robot on the map driven by the learned policy: a fleet evaluation.
 
 ``python -m crllk.evaluate run=RUN fleet=4`` puts four robots on the run's map, each driven by
-the run's policy from its own camera (one shared policy), and writes ``<run>/fleet.json``: an
-evaluation document (:func:`crllk.evaluation.report.result_document`) with one row per robot
-and fleet episode, so every constraint is judged per robot, and a ``fleet`` section with each
-robot's own metrics and whom each collision hit.
+the run's policy from its own observations (one shared policy; a pixel run's robots each read
+their own camera), and writes ``<run>/fleet.json``: an evaluation document
+(:func:`crllk.evaluation.report.result_document`) with one row per robot and fleet episode, so
+every constraint is judged per robot, and a ``fleet`` section with each robot's own metrics and
+whom each collision hit.
 
 The fleet is N simulations of the map stepped together (:mod:`crllk.tasks.fleet`): robot i
 drives in simulation i with full physics; the other robots are that simulation's mover
