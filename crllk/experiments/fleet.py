@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import json
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -104,8 +104,7 @@ def fleet(settings: Settings) -> list[Path]:
     for agent in dict.fromkeys(s.agent for s in specs):
         chosen = [s for s in specs if s.agent == agent]
         agents[agent] = {"alone": agent_entry([outcome.documents[s] for s in chosen]),
-                         "fleet": agent_entry([fleets[s] for s in chosen]),
-                         "by_robot": [fleets[s]["fleet"]["by_robot"] for s in chosen]}
+                         "fleet": agent_entry([fleets[s] for s in chosen])}
     first = outcome.documents[specs[0]]
     document = {"title": f"Every robot driven by the policy ({settings.obs})",
                 "settings": {**settings_dict(settings), "robots": FLEET_ROBOTS,
@@ -130,8 +129,9 @@ def fleet_markdown(document: Mapping[str, Any]) -> str:
              "one drive with the run's policy from their own camera, where each robot's "
              "episode is one row (every constraint judged per robot). Each row: every "
              "constraint's metric with its 95 % interval (✓ within its threshold, ✗ with the "
-             "excess), J_R (m), the Duckietown community's medians, what the collisions hit "
-             "(in the fleet, `vehicle` is another robot), and each robot's J_coll in the fleet.",
+             "excess), J_R (m), the Duckietown community's medians, and what the collisions "
+             "hit (in the fleet, `vehicle` is another robot: a collision between two robots "
+             "ends both robots' episodes and counts in both).",
              "",
              f"- Observation: `{settings['obs']}`; alone: {settings['episodes']} test episodes "
              f"per run; fleet: {settings['fleet_episodes']} fleet episodes of {robots} robots "
@@ -141,24 +141,16 @@ def fleet_markdown(document: Mapping[str, Any]) -> str:
              f"- Command: `{settings['command']}` ({invocation_note(document)}).",
              f"- Machine: {settings['machine']}.", ""]
     header = ["agent", "evaluation", "seed", *(c["metric"] for c in constraints), "J_R",
-              *(f"{label} ({unit})" for label, unit, _ in FORMATS.values()), "collisions",
-              "J_coll per robot"]
+              *(f"{label} ({unit})" for label, unit, _ in FORMATS.values()), "collisions"]
     lines += ["| " + " | ".join(header) + " |", "|" + " --- |" * len(header)]
     for agent, block in agents.items():
         for label in ("alone", "fleet"):
-            for index, cells in enumerate(run_cells(block[label], thresholds)):
-                per_robot = "—" if label == "alone" else robot_column(block["by_robot"][index])
+            for cells in run_cells(block[label], thresholds):
                 values = [cells["seed"], *(cells[c["metric"]] for c in constraints),
-                          cells["J_R"], *(cells[m] for m in METRICS), cells["collisions"],
-                          per_robot]
+                          cells["J_R"], *(cells[m] for m in METRICS), cells["collisions"]]
                 lines.append(f"| {agent} | {label} | " + " | ".join(values) + " |")
     lines.append("")
     return "\n".join(lines)
-
-
-def robot_column(by_robot: Sequence[Mapping[str, float]]) -> str:
-    """Each robot's J_coll in a fleet evaluation, robot 0 first."""
-    return " / ".join(f"{robot['J_coll']:.3f}" for robot in by_robot)
 
 
 __all__ = ["FLEET_AGENTS", "FLEET_EVALUATION", "FLEET_ROBOTS", "FLEET_TASK", "fleet",
