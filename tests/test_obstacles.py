@@ -168,6 +168,27 @@ def test_encounter_probability_is_checked():
         crllk.load("obstacle_loop", observation="state", overrides={"spawn": {"encounters": 1.5}})
 
 
+def test_encounters_can_favour_obstacles_on_curves():
+    """obstacle_loop blocks five lanes, two of them on curves: with
+    spawn.encounter_curve_weight = 4 a curve is drawn 8 of 11 times, with 1 each obstacle
+    alike and by the same draws as without the setting."""
+    weighted = crllk.load("obstacle_loop", observation="state", seed=2,
+                          overrides={"spawn": {"encounter_curve_weight": 4.0}}).task
+    assert [bool(lane.turn) for lane, _ in weighted._blocking].count(True) == 2
+    assert len(weighted._blocking) == 5
+    draws = 4000
+    on_curves = sum(bool(weighted._encounter_obstacle()[0].turn) for _ in range(draws))
+    assert on_curves / draws == pytest.approx(8 / 11, abs=0.025)  # 3.5 standard deviations
+    alike, default = (crllk.load("obstacle_loop", observation="state", seed=2, overrides=o).task
+                      for o in ({"spawn": {"encounter_curve_weight": 1.0}}, None))
+    assert alike._encounter_weights is None
+    assert ([alike._encounter_obstacle()[1].index for _ in range(50)]
+            == [default._encounter_obstacle()[1].index for _ in range(50)])
+    with pytest.raises(ConfigError, match=r"spawn.encounter_curve_weight: must be positive"):
+        crllk.load("obstacle_loop", observation="state",
+                   overrides={"spawn": {"encounter_curve_weight": 0.0}})
+
+
 def test_encounter_episodes_are_truncated_at_their_own_horizon():
     """With spawn.encounter_horizon = 20, encounter episodes are truncated (not terminated)
     after 20 steps and the others run on; a value set must be positive."""

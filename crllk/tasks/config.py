@@ -44,6 +44,9 @@ class SpawnConfig:
     encounter_lateral_offset: tuple[float, float] = (-0.25, 0.04)
     """Range of such a start's offset from the lane centre (m, positive right): wider than
     ``lateral_offset``, so that some starts are already beside the obstacle's left side."""
+    encounter_curve_weight: float = 1.0
+    """How much likelier such a start is before a blocking obstacle on a curve tile than
+    before one on another tile (1: every blocking obstacle alike)."""
     encounter_horizon: int = 0
     """Control steps after which an episode that started in front of an obstacle is truncated
     (a positive number; unset, 0: the task's ``horizon``), so that training frames go to
@@ -161,6 +164,9 @@ def parse_task(settings: Mapping[str, Any], *, name: str, dmap: DuckietownMap,
     if config.spawn.encounters > 1:
         raise ConfigError(source, "spawn.encounters",
                           f"is a probability and must lie in [0, 1], got {config.spawn.encounters}")
+    if not config.spawn.encounter_curve_weight > 0:
+        raise ConfigError(source, "spawn.encounter_curve_weight",
+                          f"must be positive, got {config.spawn.encounter_curve_weight}")
     if config.spawn.encounter_distance[0] < 0:
         raise ConfigError(source, "spawn.encounter_distance",
                           f"must be non-negative, got {list(config.spawn.encounter_distance)}")

@@ -28,10 +28,10 @@ import numpy as np
 from dm_control.rl import control
 from dm_env import specs
 
-from crllk.maps import DuckietownMap, LanePose, MapObject
+from crllk.maps import DuckietownMap, Lane, LanePose, MapObject
 from crllk.maps.lanes import LANE_OFFSET
 from crllk.maps.markings import lane_edges, white_lateral
-from crllk.maps.obstacles import ObstacleIndex, footprint_points
+from crllk.maps.obstacles import LaneObstacle, ObstacleIndex, footprint_points
 from crllk.sim import constants as C
 from crllk.sim.camera_effects import FrameEffects, add_noise, compress
 from crllk.sim.physics import Physics, check_points
@@ -144,6 +144,17 @@ def command_history_length(config: TaskConfig) -> int:
     return max(1, math.ceil(config.motor.delay * config.control_rate - 1e-9))
 
 
+def encounter_weights(blocking: list[tuple[Lane, LaneObstacle]],
+                      curve_weight: float) -> np.ndarray | None:
+    """Probabilities of the encounter starts before ``blocking`` (lane, obstacle) pairs: those
+    on a curve's lane ``curve_weight`` times likelier than the others; None when all are alike
+    (the starts then draw the obstacle as they always have)."""
+    weights = np.array([curve_weight if lane.turn else 1.0 for lane, _ in blocking])
+    if not blocking or np.all(weights == weights[0]):
+        return None
+    return weights / weights.sum()
+
+
 class LaneKeeping(control.Task):
     """Drive far along the lane; the costs report lane deviation and collisions.
 
@@ -183,6 +194,9 @@ class LaneKeeping(control.Task):
                           for o in self.obstacles.on_lane(lane)
                           if o.lateral_left < _BLOCKING_HALF_WIDTH
                           and o.lateral_right > -_BLOCKING_HALF_WIDTH]
+        self._encounter_weights = encounter_weights(self._blocking,
+                                                    config.spawn.encounter_curve_weight)
+        """Probability of an encounter start before each blocking obstacle (None: alike)."""
 
     # ----- specs ------------------------------------------------------------------------
     def action_spec(self, physics: Physics):
@@ -256,9 +270,16 @@ class LaneKeeping(control.Task):
         raise RuntimeError(f"{self.config.source}: spawn: no clear start pose found in "
                            f"{_SPAWN_ATTEMPTS} tries; lower spawn.obstacle_clearance")
 
+    def _encounter_obstacle(self) -> tuple[Lane, LaneObstacle]:
+        """A blocking (lane, obstacle) drawn for an encounter start, by its weight."""
+        weights = self._encounter_weights
+        if weights is None:
+            return self._blocking[self.random.randint(len(self._blocking))]
+        return self._blocking[self.random.choice(len(self._blocking), p=weights)]
+
     def _encounter_start(self) -> tuple[Any, float]:
         """(lane, along) a random ``spawn.encounter_distance`` before a blocking obstacle."""
-        lane, obstacle = self._blocking[self.random.randint(len(self._blocking))]
+        lane, obstacle = self._encounter_obstacle()
         back = obstacle.along_start - self.random.uniform(*self.config.spawn.encounter_distance)
         while back < 0.0:
             previous = self.obstacles.previous_lane(lane)

@@ -30,6 +30,8 @@ def build_env(config: TrainConfig, *, num_envs: int, seed: int,
         spawn = {**overrides.get("spawn", {}), "encounters": config.encounters}
         if config.encounter_horizon:
             spawn["encounter_horizon"] = config.encounter_horizon
+        if config.encounter_curve_weight != 1.0:
+            spawn["encounter_curve_weight"] = config.encounter_curve_weight
         overrides = {**overrides, "spawn": spawn}
     return make_env(config.task_source(), num_envs=num_envs, observation=config.obs.name,
                     action=config.action.name, seed=seed, overrides=overrides,
