@@ -256,8 +256,9 @@ class TrainConfig:
     encounter_horizon: int = setting(0, check=non_negative)
     """Steps after which such episodes are truncated (0: the task's horizon)."""
     encounter_curve_weight: float = setting(1.0, check=positive)
-    """How much likelier such an episode starts before an obstacle on a curve than before
-    one elsewhere (1: every blocking obstacle alike)."""
+    """How much likelier such an episode starts before an obstacle on a lane that turns than
+    before one on a straight lane (1: the task's own ``spawn.encounter_curve_weight``, by
+    default every blocking obstacle alike)."""
     threads: int = setting(1, check=positive)
     """Torch CPU threads for the networks (the simulations use one core)."""
     checkpoint_every: int = setting(10, check=positive)

@@ -189,6 +189,21 @@ def test_encounters_can_favour_obstacles_on_curves():
                    overrides={"spawn": {"encounter_curve_weight": 0.0}})
 
 
+def test_the_trainers_curve_weight_reaches_its_training_tasks():
+    from crllk.config import validate
+    from crllk.training.build import build_env
+    from crllk.training.compose import compose_config
+
+    config = validate(compose_config(["task=obstacle_loop", "obs=state",
+                                      "encounter_curve_weight=4"]))
+    env = build_env(config, num_envs=1, seed=0, training=True)
+    try:
+        weights = env.tasks[0]._encounter_weights
+        assert weights is not None and sorted(weights * 11) == pytest.approx([1, 1, 1, 4, 4])
+    finally:
+        env.close()
+
+
 def test_encounter_episodes_are_truncated_at_their_own_horizon():
     """With spawn.encounter_horizon = 20, encounter episodes are truncated (not terminated)
     after 20 steps and the others run on; a value set must be positive."""

@@ -126,6 +126,8 @@ def evaluate_fleet(run_dir: str | Path, *, robots: int, episodes: int,
                 torch.manual_seed(seed)
                 result, hit_robots = play_fleet(env, actor, board, episodes,
                                                 deterministic=deterministic)
+        except ConfigError as err:  # too crowded a map: name the run
+            raise ConfigError(run_dir, err.field, err.problem) from None
         finally:
             env.close()
         fleet_section = {"robots": robots,

@@ -126,7 +126,7 @@ def fleet_markdown(document: Mapping[str, Any]) -> str:
              f"Each run of the traffic experiment on `{document['task']}` evaluated twice on the "
              "test seed with its sampled policy: **alone**, the robot among the scripted "
              f"traffic (its test evaluation), and in a **fleet** of {robots} robots that every "
-             "one drive with the run's policy from their own camera, where each robot's "
+             "one drive with the run's policy from their own observations, where each robot's "
              "episode is one row (every constraint judged per robot). Each row: every "
              "constraint's metric with its 95 % interval (✓ within its threshold, ✗ with the "
              "excess), J_R (m), the Duckietown community's medians, and what the collisions "

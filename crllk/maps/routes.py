@@ -123,11 +123,11 @@ class Route:
         directly: a point off the grid is on none of them."""
         size, top, on_tile, reach = self.map.tile_size, self.map.rows - 1, self._on_tile, self.reach
         near_x, near_y, limit = near if near is not None else (0.0, 0.0, math.inf)
-        limit = limit ** 2
+        limit = limit ** 2  # inf: no point left out (squares of huge coordinates not taken)
         floor = math.floor
         nearest = None
         for x, y in points:
-            if (x - near_x) ** 2 + (y - near_y) ** 2 > limit:
+            if limit < math.inf and (x - near_x) ** 2 + (y - near_y) ** 2 > limit:
                 continue
             found = on_tile.get((floor(x / size), top - floor(y / size)))
             if found is None:

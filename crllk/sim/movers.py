@@ -115,7 +115,7 @@ class Movers:
         """Place mover k at ``poses[k]`` = (x, y, yaw) (m, rad) on the floor."""
         if len(poses) != len(self.mocap):
             raise ValueError(f"{len(poses)} poses for {len(self.mocap)} movers")
-        if not poses:
+        if len(poses) == 0:
             return
         data.mocap_pos[self.mocap] = [(x, y, height) for (x, y, _), height
                                       in zip(poses, self._heights, strict=True)]

@@ -45,8 +45,9 @@ class SpawnConfig:
     """Range of such a start's offset from the lane centre (m, positive right): wider than
     ``lateral_offset``, so that some starts are already beside the obstacle's left side."""
     encounter_curve_weight: float = 1.0
-    """How much likelier such a start is before a blocking obstacle on a curve tile than
-    before one on another tile (1: every blocking obstacle alike)."""
+    """How much likelier such a start is before a blocking obstacle on a lane that turns (a
+    curve, or a turn through an intersection) than before one on a straight lane (1: every
+    blocking obstacle alike)."""
     encounter_horizon: int = 0
     """Control steps after which an episode that started in front of an obstacle is truncated
     (a positive number; unset, 0: the task's ``horizon``), so that training frames go to

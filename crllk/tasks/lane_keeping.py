@@ -147,8 +147,8 @@ def command_history_length(config: TaskConfig) -> int:
 def encounter_weights(blocking: list[tuple[Lane, LaneObstacle]],
                       curve_weight: float) -> np.ndarray | None:
     """Probabilities of the encounter starts before ``blocking`` (lane, obstacle) pairs: those
-    on a curve's lane ``curve_weight`` times likelier than the others; None when all are alike
-    (the starts then draw the obstacle as they always have)."""
+    on a lane that turns ``curve_weight`` times likelier than those on a straight lane; None
+    when all are alike (the starts then draw the obstacle as they always have)."""
     weights = np.array([curve_weight if lane.turn else 1.0 for lane, _ in blocking])
     if not blocking or np.all(weights == weights[0]):
         return None
