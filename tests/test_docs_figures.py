@@ -309,3 +309,29 @@ def test_the_traffic_sentence_is_what_the_runs_show():
         pedestrians["thresholds"]["collision"]
     assert "answering in them, the teacher still hits crossing duckies" in text
     assert "(`action=stoppable`), it holds α2 on both tasks" in text
+    stoppable = {task: block["agents"]["CRLLK-C-stoppable"]
+                 for task, block in document["tasks"].items()}
+    assert "CRLLK-C learning in these actions holds every constraint on `traffic_loop` on all " \
+        "three seeds, sampled and deployed" in text
+    traffic = stoppable["traffic_loop"]
+    assert len(traffic["satisfied"]) == 3 and all(traffic["satisfied"])
+    assert len(traffic["mode"]["satisfied"]) == 3 and all(traffic["mode"]["satisfied"])
+    assert "On `pedestrian_loop` it still misses α2 on every seed: it hits crossing duckies in " \
+        "6–10 % of episodes, and one seed also leaves the road in about one episode in ten" in text
+    pedestrian = stoppable["pedestrian_loop"]
+    bound = document["tasks"]["pedestrian_loop"]["thresholds"]["collision"]
+    assert all(v > bound for v in pedestrian["J_coll"]["values"])
+    assert len(pedestrian["J_coll"]["values"]) == 3
+    entries = (pedestrian, pedestrian["mode"])
+    hit_shares = [c["collisions_by_kind"].get("pedestrian", 0) / c["episodes"]
+                  for entry in entries for c in entry["community"]]
+    assert (round(100 * min(hit_shares)), round(100 * max(hit_shares))) == (6, 10)
+    off_road = [[t.get("off_road", 0) / sum(t.values()) for t in entry["terminations"]]
+                for entry in entries]
+    leaving = [k for k in range(3) if all(0.05 < shares[k] < 0.15 for shares in off_road)]
+    assert len(leaving) == 1
+    assert all(shares[k] < 0.01 for shares in off_road for k in range(3) if k not in leaving)
+    terminations = pedestrian["terminations"][leaving[0]]
+    results_page = " ".join(page("results/traffic.md").split())
+    assert (f"on seed {leaving[0]}, by leaving the road ({terminations['off_road']} of its "
+            f"{sum(terminations.values())} sampled test episodes") in results_page
