@@ -102,6 +102,28 @@ def test_where_the_time_goes_is_the_committed_measurement():
     assert f"{1024 / state:.2f} s of it collecting ({state:,.0f} frames/s)" in text
 
 
+def test_the_traffic_rounds_are_the_committed_measurements():
+    """The range of the traffic figure timed in turns against the code before the last
+    speed-ups, per commit, and the drift of the rate without movers, from the committed
+    rounds."""
+    ratios: dict[str, list[float]] = {}
+    plain: list[float] = []
+    commit = None
+    for line in (REPO / "results/bench/traffic-rounds.txt").read_text().splitlines():
+        if line.startswith("== round"):
+            commit = line.split()[3] if "traffic_loop" in line or len(line.split()) == 5 else None
+        elif commit and line.startswith("make_env pixels without movers"):
+            plain.append(float(line.split()[-1]))
+        elif commit and line.startswith("make_env pixels with traffic"):
+            ratios.setdefault(commit, []).append(float(line.split()[-3]))
+    (old, new) = ratios
+    assert old == "c778c28" and len(ratios[old]) == len(ratios[new]) == 5
+    text = prose("benchmarks.md")
+    assert (f"`traffic_loop` {min(ratios[new]):.2f}–{max(ratios[new]):.2f} over five rounds, "
+            f"against {min(ratios[old]):.2f}–{max(ratios[old]):.2f} before") in text
+    assert f"between {min(plain):,.0f} and {max(plain):,.0f} steps/s" in text
+
+
 def test_the_traffic_throughput_is_the_committed_measurement():
     """The Benchmarks page's traffic ratios (the batched pixel env with movers against the same
     task without them), from the committed bench output."""
