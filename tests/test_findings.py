@@ -275,6 +275,12 @@ def test_the_maps_without_obstacles_are_the_test_evaluations():
         in camera
     assert "one run (zigzag, PPO-C seed 1 sampled, J_coll 0.03)" in camera
 
+COST_DISCOUNT_RUNS = (("default, seed 0", "CRLLK-D-a0.5-seed0"),
+                      ("default, seed 1", "CRLLK-D-a0.5-seed1"),
+                      ("`ppo.cost_gamma=0.99`, seed 0", "CRLLK-D-costgamma99-a0.5-seed0"),
+                      ("`ppo.cost_gamma=0.99`, seed 1", "CRLLK-D-costgamma99-a0.5-seed1"))
+"""The cost-discount trial's rows in the findings: label and run directory."""
+
 
 def test_the_cost_discount_trial_rows_are_its_evaluations():
     """The cost-discount table of the findings: each run's validation evaluations, sampled
@@ -287,10 +293,7 @@ def test_the_cost_discount_trial_rows_are_its_evaluations():
         return (f"{summary['J_clane']:.3f} / {summary['J_coll']:.2f}, blocked "
                 f"{blocked['J_coll']:.3f}")
 
-    for label, run in (("default, seed 0", "CRLLK-D-a0.5-seed0"),
-                       ("default, seed 1", "CRLLK-D-a0.5-seed1"),
-                       ("`ppo.cost_gamma=0.99`, seed 0", "CRLLK-D-costgamma99-a0.5-seed0"),
-                       ("`ppo.cost_gamma=0.99`, seed 1", "CRLLK-D-costgamma99-a0.5-seed1")):
+    for label, run in COST_DISCOUNT_RUNS:
         sampled, mode = (json.loads((root / run / f"{name}.json").read_text())
                          for name in ("eval", "eval-mode"))
         assert sampled["evaluation"]["seed"] == mode["evaluation"]["seed"] == 1_000_000
@@ -315,10 +318,7 @@ def test_the_cost_discount_rows_at_400_episodes_are_their_evaluations():
                 f"{len(episodes)}), blocked {blocked['J_clane']:.3f} / {blocked['J_coll']:.3f}")
 
     collisions, by_object = {}, {}
-    for label, run in (("default, seed 0", "CRLLK-D-a0.5-seed0"),
-                       ("default, seed 1", "CRLLK-D-a0.5-seed1"),
-                       ("`ppo.cost_gamma=0.99`, seed 0", "CRLLK-D-costgamma99-a0.5-seed0"),
-                       ("`ppo.cost_gamma=0.99`, seed 1", "CRLLK-D-costgamma99-a0.5-seed1")):
+    for label, run in COST_DISCOUNT_RUNS:
         sampled, mode = (json.loads((root / run / f"{name}.json").read_text())
                          for name in ("val400", "val400-mode"))
         for document, deterministic in ((sampled, False), (mode, True)):
