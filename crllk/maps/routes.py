@@ -110,16 +110,12 @@ class Route:
             return None
         return distance, lateral, lane
 
-    def distance_within(self, x: float, y: float, half_width: float) -> float | None:
-        """``project(x, y).distance`` where that point lies within ``half_width`` (m) of its
-        lane's centre, else None (the same numbers, computed with less)."""
-        return self.nearest_within([(x, y)], half_width)
-
     def nearest_within(self, points: list[tuple[float, float]], half_width: float,
                        near: tuple[float, float, float] | None = None) -> float | None:
-        """The least :meth:`distance_within` of ``points`` (None if none has one), leaving
-        out before projecting it any point farther than ``near[2]`` (m) in a straight line
-        from (``near[0]``, ``near[1]``). The route's tiles are looked up by their indices
+        """The least ``project(x, y).distance`` of the ``points`` that lie within
+        ``half_width`` (m) of their lane's centre (None if none does), leaving out before
+        projecting it any point farther than ``near[2]`` (m) in a straight line from
+        (``near[0]``, ``near[1]``). The route's tiles are looked up by their indices
         directly: a point off the grid is on none of them."""
         size, top, on_tile, reach = self.map.tile_size, self.map.rows - 1, self._on_tile, self.reach
         near_x, near_y, limit = near if near is not None else (0.0, 0.0, math.inf)
