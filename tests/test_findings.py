@@ -303,6 +303,18 @@ def test_the_cost_discount_trial_rows_are_its_evaluations():
     assert "cost_gamma: 0.99" in config
 
 
+def _val400_pair(run: Path) -> tuple[dict, dict]:
+    """A run's ``val400`` and ``val400-mode`` evaluations, checked to be 400 validation
+    episodes of the sampled policy and of its mode."""
+    sampled, mode = (json.loads((run / f"{name}.json").read_text())
+                     for name in ("val400", "val400-mode"))
+    for document, deterministic in ((sampled, False), (mode, True)):
+        assert document["evaluation"]["seed"] == 1_000_000
+        assert document["evaluation"]["episodes"] == 400
+        assert document["evaluation"]["deterministic"] is deterministic
+    return sampled, mode
+
+
 def test_the_cost_discount_rows_at_400_episodes_are_their_evaluations():
     """The 400-episode table of the cost-discount trial: each run's ``val400`` and
     ``val400-mode`` evaluations (validation seed, 400 episodes), all episodes and the blocked
@@ -319,12 +331,7 @@ def test_the_cost_discount_rows_at_400_episodes_are_their_evaluations():
 
     collisions, by_object = {}, {}
     for label, run in COST_DISCOUNT_RUNS:
-        sampled, mode = (json.loads((root / run / f"{name}.json").read_text())
-                         for name in ("val400", "val400-mode"))
-        for document, deterministic in ((sampled, False), (mode, True)):
-            assert document["evaluation"]["seed"] == 1_000_000
-            assert document["evaluation"]["episodes"] == 400
-            assert document["evaluation"]["deterministic"] is deterministic
+        sampled, mode = _val400_pair(root / run)
         assert f"| {label} | {cell(sampled)} | {cell(mode)} |" in FINDINGS
         collisions[run] = [int(sum(e["cost_collision"] for e in d["episodes"]))
                            for d in (sampled, mode)]
@@ -344,3 +351,92 @@ def test_the_cost_discount_rows_at_400_episodes_are_their_evaluations():
     total = sum(by_object.values())
     assert f"Of the {total} episodes of the eight evaluations that ended on an obstacle, " \
            f"{by_object['3 duckie (0.88, 0.88)']} ended on the duckie in the centre" in text
+
+
+CURVE_WEIGHT_RUNS = (("default, seed 0", "CRLLK-D-a0.5-seed0"),
+                     ("default, seed 1", "CRLLK-D-a0.5-seed1"),
+                     ("`encounter_curve_weight=4`, seed 0", "CRLLK-D-curve4-a0.5-seed0"),
+                     ("`encounter_curve_weight=4`, seed 1", "CRLLK-D-curve4-a0.5-seed1"))
+"""The curve-weight trial's rows in the findings: label and run directory."""
+
+
+def _val400_cell(document: dict) -> str:
+    """A findings cell of a 400-episode validation evaluation: all episodes, then each
+    direction."""
+    summary, episodes = document["summary"], document["episodes"]
+    directions = document["breakdown"]["by_direction"]
+    hits = int(sum(e["cost_collision"] for e in episodes))
+    return (f"{summary['J_clane']:.3f} / {summary['J_coll']:.4f} ({hits} of {len(episodes)}), "
+            f"blocked {directions['intended']['J_clane']:.3f} / "
+            f"{directions['intended']['J_coll']:.3f}, reverse "
+            f"{directions['reverse']['J_clane']:.3f}")
+
+
+def test_the_curve_weight_rows_are_their_validation_evaluations():
+    """The curve-weight table: each run's ``val400`` and ``val400-mode`` (validation seed, 400
+    episodes); the prose's collision counts, modes over α1, reverse deviations and the
+    trial runs' training lane cost and final λ_lane."""
+    import csv
+
+    root = REPO / "results/runs/pixels/obstacle_loop"
+    text = " ".join(FINDINGS.split())
+    collisions = {}
+    for label, run in CURVE_WEIGHT_RUNS:
+        sampled, mode = _val400_pair(root / run)
+        assert f"| {label} | {_val400_cell(sampled)} | {_val400_cell(mode)} |" in FINDINGS
+        collisions[run] = [int(sum(e["cost_collision"] for e in d["episodes"]))
+                           for d in (sampled, mode)]
+    trial = [v for run, v in collisions.items() if "curve4" in run]
+    default = [v for run, v in collisions.items() if "curve4" not in run]
+    assert (f"{sum(t[0] for t in trial)} collisions in 800 episodes against "
+            f"{sum(d[0] for d in default)}") in text
+    assert (f"({sum(t[1] for t in trial)} in 800 against {sum(d[1] for d in default)})"
+            in text)
+    modes = [json.loads((root / f"CRLLK-D-curve4-a0.5-seed{s}/val400-mode.json").read_text())
+             for s in (0, 1)]
+    assert all(m["summary"]["J_clane"] > 0.5 for m in modes)
+    assert (f"beyond α1 ({modes[0]['summary']['J_clane']:.3f} and "
+            f"{modes[1]['summary']['J_clane']:.3f} dm)") in text
+    lane_costs, lambdas = [], []
+    for seed in (0, 1):
+        with (root / f"CRLLK-D-curve4-a0.5-seed{seed}/metrics.csv").open() as f:
+            rows = list(csv.DictReader(f))
+        late = [r for r in rows if int(r["iteration"]) >= 400 and r["J_clane"] != "nan"]
+        episodes = sum(float(r["episodes"]) for r in late)
+        lane_costs.append(sum(float(r["episodes"]) * float(r["J_clane"]) for r in late)
+                          / episodes)
+        lambdas.append(float(rows[-1]["lambda_lane"]))
+        assert int(rows[-1]["iteration"]) - 400 + 1 == 90
+    assert (f"training episodes {lane_costs[0]:.3f} and {lane_costs[1]:.3f} dm over the last 90 "
+            f"iterations, λ_lane {lambdas[0]:.2f} at the end of both runs") in text
+    assert lambdas[0] == lambdas[1]
+    for seed in (0, 1):
+        sampled = json.loads((root / f"CRLLK-D-curve4-a0.5-seed{seed}/val400.json").read_text())
+        reverse = [d["breakdown"]["by_direction"]["reverse"]["J_clane"]
+                   for d in (modes[seed], sampled)]
+        assert 2 <= reverse[0] / reverse[1] <= 3  # "two to three times as much"
+    config = (root / "CRLLK-D-curve4-a0.5-seed0" / "config.yaml").read_text()
+    assert "encounter_curve_weight: 4.0" in config
+
+
+def test_the_curve_weight_s_shares_of_encounters_are_the_task_s():
+    """"2 in 5" of the encounter episodes before an obstacle on a turning lane by default,
+    "8 in 11" at W = 4, the curve duckie "4 in 11" instead of "1 in 5"."""
+    from fractions import Fraction
+
+    from crllk.tasks.config import load_task_config
+    from crllk.tasks.lane_keeping import LaneKeeping, encounter_weights
+
+    task = LaneKeeping(load_task_config(REPO / "tasks/obstacle_loop.yaml"), observation="state")
+    turning = [bool(lane.turn) for lane, _ in task._blocking]
+    assert len(turning) == 5 and sum(turning) == 2
+    weights = encounter_weights(task._blocking, 4.0)
+    on_turns = Fraction(float(sum(w for w, t in zip(weights, turning, strict=True) if t)))
+    on_turns = on_turns.limit_denominator(20)
+    assert on_turns == Fraction(8, 11)
+    assert all(Fraction(float(w)).limit_denominator(20) == Fraction(4, 11)
+               for w, t in zip(weights, turning, strict=True) if t)
+    assert encounter_weights(task._blocking, 1.0) is None  # uniform: 1 in 5 each
+    text = " ".join(FINDINGS.split())
+    assert "got 2 in 5 of them" in text and "get 8 in 11 of the encounter episodes" in text
+    assert "the curve duckie 4 in 11 instead of 1 in 5" in text
