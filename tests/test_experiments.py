@@ -706,9 +706,18 @@ def test_fleet_at_a_tiny_budget(tmp_path):
     text = (results / "fleet.md").read_text()
     assert text == fleet_markdown(document)
     assert "| CRLLK-D | alone | 0 |" in text and "| PPO-D | fleet | 0 |" in text
-    # the invocation's wall time counts its fleet evaluations, not only training and testing
     assert document["evaluations_made"] >= 2 * len(FLEET_AGENTS)
-    assert document["wall_s"] > 0.0
+    # the invocation's wall time counts its fleet evaluations, not only training and testing:
+    # with only the fleet evaluations to make again it takes longer than with nothing to do
+    fleet_files = sorted((tmp_path / "runs").rglob("test-fleet.json"))
+    assert len(fleet_files) == document["runs_total"]
+    for path in fleet_files:
+        path.unlink()
+    again = [json.loads((_run_tiny_experiment("fleet", tiny, tmp_path) / "fleet.json")
+                        .read_text()) for _ in range(2)]
+    assert [d["evaluations_made"] for d in again] == [len(fleet_files), 0]
+    assert [d["runs_trained"] for d in again] == [0, 0]
+    assert again[0]["wall_s"] > again[1]["wall_s"] + 1.0  # a fleet evaluation takes seconds
 
 
 def test_fleet_without_its_agents_fails_clearly(tmp_path):
