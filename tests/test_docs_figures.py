@@ -335,3 +335,27 @@ def test_the_traffic_sentence_is_what_the_runs_show():
     results_page = " ".join(page("results/traffic.md").split())
     assert (f"on seed {leaving[0]}, by leaving the road ({terminations['off_road']} of its "
             f"{sum(terminations.values())} sampled test episodes") in results_page
+
+
+def test_how_the_pedestrian_seed_leaves_the_road_is_its_endings():
+    """The results page's description of CRLLK-C-stoppable seed 1 leaving the road on
+    pedestrian_loop is that run's ``endings.json`` (100 validation episodes, sampled)."""
+    import statistics
+
+    run = REPO / "results/runs/pixels/pedestrian_loop/CRLLK-C-stoppable-a0.5-seed1"
+    document = json.loads((run / "endings.json").read_text())
+    assert document["seed"] == 1_000_000 and not document["deterministic"]
+    assert document["summary"]["episodes"] == 100 and document["seconds"] == 2.0
+    off = [e for e in document["endings"] if e["termination"] == "off_road"]
+    straight = [e for e in off if e["tile_kind"] == "straight"]
+    top_row = [e for e in straight if e["tile"][1] == 1]
+    lateral = [100 * e["mean_lateral"] for e in off]
+    low = statistics.median(e["heading_error_deg"][0] for e in off)
+    high = statistics.median(e["heading_error_deg"][1] for e in off)
+    swings = [e["swings"] for e in off]
+    text = " ".join(page("results/traffic.md").split())
+    assert (f"{len(off)} of them ended off the road, {len(straight)} on straight tiles "
+            f"({len(top_row)} on the top row)") in text
+    assert f"drove {min(lateral):.1f}–{max(lateral):.1f} cm right of its lane centre" in text
+    assert f"between about −{-round(low)}° and +{round(high)}°" in text
+    assert f"its turn changing side {min(swings)} to {max(swings)} times" in text

@@ -141,7 +141,8 @@ def test_a_payload_runs_only_when_the_file_is_trusted(tmp_path, trained, payload
 @pytest.mark.parametrize(("module", "name"), [
     ("crllk.evaluate", POLICY_FILE), ("crllk.evaluate", CHECKPOINT_FILE),
     ("crllk.export", POLICY_FILE), ("crllk.export", CHECKPOINT_FILE),
-    ("crllk.analysis.cost_critics", CHECKPOINT_FILE)])
+    ("crllk.analysis.cost_critics", CHECKPOINT_FILE),
+    ("crllk.analysis.endings", POLICY_FILE), ("crllk.analysis.endings", CHECKPOINT_FILE)])
 def test_reading_a_crafted_run_is_refused(tmp_path, trained, module, name):
     run_dir = shutil.copytree(trained, tmp_path / "run")
     if name == POLICY_FILE:  # the kept policy is read where the checkpoints are gone
@@ -150,11 +151,13 @@ def test_reading_a_crafted_run_is_refused(tmp_path, trained, module, name):
     path = crafted(run_dir / name, marker)
     arguments = {"crllk.evaluate": [f"run={run_dir}", "episodes=1", "num_envs=1"],
                  "crllk.export": [f"run={run_dir}"],
-                 "crllk.analysis.cost_critics": [str(run_dir), "--batches", "1"]}[module]
+                 "crllk.analysis.cost_critics": [str(run_dir), "--batches", "1"],
+                 "crllk.analysis.endings": [str(run_dir), "--episodes", "1"]}[module]
     err = assert_refused(command(module, *arguments), path)
     assert "may execute code: refused" in err and "crllk.convert" in err
     assert not marker.exists()
     assert not (run_dir / "eval.json").exists() and not (run_dir / "policy.onnx").exists()
+    assert not (run_dir / "endings.json").exists()
 
 
 def test_resuming_a_crafted_checkpoint_is_refused(tmp_path, trained):

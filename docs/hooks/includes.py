@@ -58,7 +58,8 @@ REFERENCE = {
     "experiments": "The experiments that train and evaluate the tables and figures of "
                    "[Results](../results/index.md), and the readers of finished runs.",
     "peers": "Serving crllk's tasks to another library's Python environment.",
-    "analysis": "Figures, map pictures and a picture of a recording.",
+    "analysis": "Figures, map pictures, a picture of a recording, the cost critics' fit and how "
+                "episodes end.",
     "bench": "The throughput benchmarks (`python -m crllk.bench` and its parts).",
 }
 """The packages of the API reference, each with what it holds."""
