@@ -440,3 +440,41 @@ def test_the_curve_weight_s_shares_of_encounters_are_the_task_s():
     text = " ".join(FINDINGS.split())
     assert "got 2 in 5 of them" in text and "get 8 in 11 of the encounter episodes" in text
     assert "the curve duckie 4 in 11 instead of 1 in 5" in text
+
+
+LANE_TARGET_RUNS = tuple((f"CRLLK-{agent}, seed {seed}",
+                          f"CRLLK-{agent}-curve4-lane0.3-a0.5-seed{seed}")
+                         for agent in "DC" for seed in (0, 1))
+"""The lane-target trial's rows in the findings: label and run directory."""
+
+
+def test_the_lane_target_rows_are_their_validation_evaluations():
+    """The lane-target table (``val400`` and ``val400-mode`` of each run, final multipliers)
+    and its prose: the multipliers' range, the collision counts against the curve weight
+    alone, CRLLK-D's blocked-direction deviation, and the modes within α1."""
+    root = REPO / "results/runs/pixels/obstacle_loop"
+    text = " ".join(FINDINGS.split())
+    sampled_hits, mode_hits, lane_lambdas, mode_lanes = [], [], [], []
+    for label, run in LANE_TARGET_RUNS:
+        sampled, mode = _val400_pair(root / run)
+        multipliers = sampled["source"]["multipliers"]
+        assert (f"| {label} | {_val400_cell(sampled)} | {_val400_cell(mode)} | "
+                f"{multipliers['lane']:.2f} / {multipliers['collision']:.1f} |") in FINDINGS
+        assert "target: 0.3" in (root / run / "config.yaml").read_text()
+        sampled_hits.append(int(sum(e["cost_collision"] for e in sampled["episodes"])))
+        mode_hits.append(int(sum(e["cost_collision"] for e in mode["episodes"])))
+        lane_lambdas.append(multipliers["lane"])
+        mode_lanes.append(mode["summary"]["J_clane"])
+    alone = [_val400_pair(root / f"CRLLK-D-curve4-a0.5-seed{s}")[0] for s in (0, 1)]
+    assert all(a["source"]["multipliers"]["lane"] == 0.0 for a in alone)
+    assert f"λ_lane ends between {min(lane_lambdas):.2f} and {max(lane_lambdas):.2f}" in text
+    assert f"collide {min(sampled_hits)} to {max(sampled_hits)} times in 400 episodes" in text
+    assert all(int(sum(e["cost_collision"] for e in a["episodes"])) == 1 for a in alone)
+    assert f"modes {min(mode_hits)} to {max(mode_hits)} times" in text
+    blocked = [_val400_pair(root / run)[0]["breakdown"]["by_direction"]["intended"]["J_clane"]
+               for _, run in LANE_TARGET_RUNS[:2]]
+    before = [a["breakdown"]["by_direction"]["intended"]["J_clane"] for a in alone]
+    assert (f"deviate {blocked[0]:.3f} and {blocked[1]:.3f} dm in the blocked direction, "
+            f"against {before[0]:.3f} and {before[1]:.3f} dm") in text
+    assert max(mode_lanes) <= 0.5
+    assert f"hold α1 ({min(mode_lanes):.3f}–{max(mode_lanes):.3f} dm)" in text
