@@ -356,6 +356,9 @@ def test_how_the_pedestrian_seed_leaves_the_road_is_its_endings():
     text = " ".join(page("results/traffic.md").split())
     assert (f"{len(off)} of them ended off the road, {len(straight)} on straight tiles "
             f"({len(top_row)} on the top row)") in text
-    assert f"drove {min(lateral):.1f}–{max(lateral):.1f} cm right of its lane centre" in text
+    final = [100 * e["final_lateral"] for e in off]
+    assert (f"drove on average {min(lateral):.1f}–{max(lateral):.1f} cm right of its lane "
+            f"centre and ended {min(final):.1f}–{max(final):.1f} cm right of it") in text
+    assert min(final) > 0  # the right side
     assert f"between about −{-round(low)}° and +{round(high)}°" in text
     assert f"its turn changing side {min(swings)} to {max(swings)} times" in text

@@ -27,16 +27,19 @@ def test_swings_count_side_changes_of_turns_beyond_the_threshold():
 
 
 def test_an_ending_s_figures_worked():
-    """Three steps: laterals 0.06, 0.08, 0.10 m (mean 0.08), headings -10°..+20°, turns 0.36,
-    -0.36, 0 (mean |turn| 0.24, one swing), the nearest mover 0.5 m away at the end."""
+    """Three steps: laterals 0.06, 0.08, 0.10 m (mean 0.08, last 0.10), headings -10°..+20°,
+    turns 0.36, -0.36, 0 (mean |turn| 0.24, one swing), the nearest mover 0.5 m away at the
+    end."""
     window = [Step(0.06, math.radians(-10), 0.36, 0.9), Step(0.08, math.radians(20), -0.36, 0.7),
               Step(0.10, math.radians(5), 0.0, 0.5)]
     found = ending("off_road", (3, 1), "straight", window)
     assert found.steps == 3 and found.tile == (3, 1) and found.tile_kind == "straight"
-    assert found.mean_lateral == pytest.approx(0.08)
+    assert found.mean_lateral == pytest.approx(0.08) and found.final_lateral == 0.10
     assert found.heading_error_deg == pytest.approx((-10.0, 20.0))
     assert found.mean_abs_turn == pytest.approx(0.24)
     assert found.swings == 1 and found.mover_distance == 0.5
+    assert ending("off_road", (3, 1), "straight", [Step(0.1, 0.0, 0.0, math.inf)]) \
+        .mover_distance is None
     other = ending("collision", (1, 2), "curve_left", window[:1])
     counts = summary([found, other], episodes=10)
     assert counts["episodes"] == 10 and counts["endings"] == 2
@@ -79,7 +82,7 @@ def test_a_policy_that_drives_straight_on_leaves_the_road_at_a_curve(straight_ru
         assert found["steps"] == 15  # 0.5 s at 30 Hz
         assert found["tile_kind"].startswith("curve")
         assert found["mean_abs_turn"] == pytest.approx(abs(straight_turn))
-        assert found["swings"] == 0 and math.isinf(found["mover_distance"])
+        assert found["swings"] == 0 and found["mover_distance"] is None  # no movers
 
 
 def test_bad_input_is_one_line(straight_run, tmp_path):

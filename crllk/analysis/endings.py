@@ -4,12 +4,14 @@
 
 An evaluation counts how often a policy leaves the road; this command shows how. It plays
 ``episodes`` episodes of the run's policy (sampled, or its mode with ``--deterministic``) from
-the validation spawn seed, never the test seed, keeps the last ``seconds`` of every episode
-that ends off the road or on a collision, and reports for each: where it ended (tile and its
-kind), how far right of its lane centre the robot drove over that window (m; negative: left),
-its heading error, how hard it turned (the wheel duties' difference, right minus left) and how
-often that turn swung from one side to the other (weaving), and how far the nearest mover
-was at the end. The result goes to ``<run>/endings.json`` (``endings-mode.json``).
+the validation spawn seed, never the test seed (episode k in simulation k mod N, each
+simulation's first episodes, as an evaluation assigns them), keeps the last ``seconds`` of
+every episode that ends off the road or on a collision, and reports for each: where it ended
+(tile and its kind), how far right of its lane centre the robot drove on average over that
+window and at its end (m; negative: left), its heading error, how hard it turned (the wheel
+duties' difference, right minus left: positive turns left) and how often that turn swung from
+one side to the other (weaving), and how far the nearest mover was at the end (None without
+movers). The result goes to ``<run>/endings.json`` (``endings-mode.json``).
 """
 
 from __future__ import annotations
@@ -45,7 +47,7 @@ class Step:
     heading_error: float
     """Yaw minus lane heading (rad)."""
     turn: float
-    """Right minus left wheel duty of the step's action."""
+    """Right minus left wheel duty of the step's action (positive: turning left)."""
     mover_distance: float
     """Distance (m) from the robot's axle to the nearest mover's centre (inf: none)."""
 
@@ -59,11 +61,13 @@ class Ending:
     tile_kind: str
     steps: int
     mean_lateral: float
+    final_lateral: float
     heading_error_deg: tuple[float, float]
     mean_abs_turn: float
     swings: int
     """Sign changes of the turn among the window's steps that turn beyond :data:`SWING`."""
-    mover_distance: float
+    mover_distance: float | None
+    """None without movers."""
 
 
 def swings(turns: Sequence[float], threshold: float = SWING) -> int:
@@ -76,10 +80,11 @@ def ending(termination: str, tile: tuple[int, int], tile_kind: str,
            window: Sequence[Step]) -> Ending:
     """The :class:`Ending` of an episode whose last steps are ``window``."""
     headings = [math.degrees(s.heading_error) for s in window]
+    nearest = window[-1].mover_distance
     return Ending(termination, tile, tile_kind, len(window),
-                  statistics.fmean(s.lateral for s in window), (min(headings), max(headings)),
-                  statistics.fmean(abs(s.turn) for s in window),
-                  swings([s.turn for s in window]), window[-1].mover_distance)
+                  statistics.fmean(s.lateral for s in window), window[-1].lateral,
+                  (min(headings), max(headings)), statistics.fmean(abs(s.turn) for s in window),
+                  swings([s.turn for s in window]), nearest if math.isfinite(nearest) else None)
 
 
 def summary(endings: Sequence[Ending], episodes: int) -> dict[str, Any]:
@@ -106,15 +111,14 @@ def play_endings(run_dir: Path, episodes: int, seconds: float,
     from crllk.envs.batched import TERMINATIONS
     from crllk.evaluation.runs import evaluation_config
     from crllk.protocol import VALIDATION_SEED
-    from crllk.rl.rollout import Rollout
+    from crllk.rl.rollout import Rollout, episode_quotas
     from crllk.tasks.actions import action_duty
     from crllk.training.build import build_env
     from crllk.training.runs import load_actor
 
     config = evaluation_config(run_dir)
-    config.workers = 1
-    torch.manual_seed(VALIDATION_SEED)
     env = build_env(config, num_envs=min(SIMULATIONS, episodes), seed=VALIDATION_SEED)
+    quotas = episode_quotas(episodes, env.num_envs).tolist()
     try:
         actor, _ = load_actor(run_dir, env)
         length = max(1, round(seconds / env.config.control_timestep))
@@ -125,8 +129,8 @@ def play_endings(run_dir: Path, episodes: int, seconds: float,
         def on_step(stepped) -> None:
             nonlocal finished
             for i, (task, physics) in enumerate(zip(env.tasks, env.physics, strict=True)):
-                if finished >= episodes:
-                    return
+                if quotas[i] == 0:  # this simulation has played its share
+                    continue
                 x, y, yaw = physics.pose()
                 pose = task.map.lane_pose(x, y, yaw)
                 left, right = action_duty(env.action_type, stepped["action"][i].tolist())
@@ -136,6 +140,7 @@ def play_endings(run_dir: Path, episodes: int, seconds: float,
                 if not bool(stepped["next", "done"][i]):
                     continue
                 finished += 1
+                quotas[i] -= 1
                 termination = TERMINATIONS[int(stepped["next", "termination"][i])]
                 if termination in ("off_road", "collision"):
                     tile = (pose.lane.column, pose.lane.row)
@@ -145,7 +150,8 @@ def play_endings(run_dir: Path, episodes: int, seconds: float,
 
         rollout = Rollout(env, actor)
         exploration = ExplorationType.DETERMINISTIC if deterministic else ExplorationType.RANDOM
-        with torch.no_grad(), set_exploration_type(exploration):
+        with torch.random.fork_rng(), torch.no_grad(), set_exploration_type(exploration):
+            torch.manual_seed(VALIDATION_SEED)
             while finished < episodes:
                 rollout.step(on_step)
     finally:
