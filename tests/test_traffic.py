@@ -469,6 +469,50 @@ def test_headway_is_the_same_measured_afresh(load):
     assert gaps[1] == pytest.approx(0.25, abs=0.01)
 
 
+def test_shortened_reaches_give_the_full_reach_answers():
+    """A vehicle looks for what is ahead only as far as it could still slow for it, and the
+    headway signal only as far as its bound: the same speeds and signals as looking the whole
+    LOOKAHEAD, for points placed at random and at the edges of those reaches."""
+    from crllk.maps.routes import LANE_HALF_WIDTH, distance_ahead
+    from crllk.tasks.follower import FollowerGains
+    from crllk.tasks.following import CORRIDOR_MARGIN, FRONT, LOOKAHEAD, following_speed
+    from crllk.tasks.traffic import Traffic
+
+    config = load_task_config("traffic_loop")
+    traffic = Traffic(config.traffic, config.map, config.control_timestep)
+    dmap, bound = config.map, config.traffic.headway
+    rng = np.random.default_rng(7)
+    slowed = signalled = 0
+    for _ in range(400):
+        lane = dmap.lanes[int(rng.integers(len(dmap.lanes)))]
+        along, cruise = float(rng.uniform(0.0, lane.length)), float(rng.uniform(0.05, 0.4))
+        gaps = [*rng.uniform(0.0, 1.3, 6).tolist(),  # and at the edges of both reaches
+                FRONT + FOLLOW_GAP + cruise, bound + FRONT, bound + FRONT - 1e-12]
+        points = []
+        for gap in gaps:
+            ahead_lane, ahead_along = advance(dmap, lane, along, gap)
+            points.append(ahead_lane.point_at(ahead_along, float(rng.uniform(-0.12, 0.12)))[:2])
+        full = distance_ahead(dmap, lane, along, points, C.FOOTPRINT_WIDTH / 2 + CORRIDOR_MARGIN,
+                              LOOKAHEAD)
+        expected = cruise
+        if lane.curvature:
+            expected = min(expected, math.sqrt(FollowerGains.max_lateral_acceleration
+                                               / abs(lane.curvature)))
+        if full is not None:
+            slowed += following_speed(full - FRONT, FOLLOW_GAP) < expected
+            expected = min(expected, following_speed(full - FRONT, FOLLOW_GAP))
+        assert traffic._vehicle_speed(lane, along, cruise, points) == expected
+        state = {"vehicles": [[dmap.lanes.index(ahead_lane), ahead_along, 0.1]]}
+        ahead_lane, ahead_along = advance(dmap, lane, along, gaps[0] + FRONT)
+        state["vehicles"][0][:2] = [dmap.lanes.index(ahead_lane), ahead_along]
+        full_gap = distance_ahead(dmap, lane, along, traffic._vehicle_outlines(state)[0],
+                                  LANE_HALF_WIDTH, max(LOOKAHEAD, bound) + FRONT)
+        signal = full_gap is not None and full_gap - FRONT < bound
+        signalled += signal
+        assert traffic.within_headway(state, lane, along) == signal
+    assert slowed > 20 and signalled > 20  # both reaches were exercised
+
+
 def test_scenes_with_movers_draw_curves_coarser_and_others_as_before():
     """A scene with movers draws its curved surfaces with movers.SLICES x STACKS; a scene
     without keeps MuJoCo's defaults, so its images are unchanged."""

@@ -110,21 +110,15 @@ class Route:
             return None
         return distance, lateral, lane
 
-    def nearest_within(self, points: list[tuple[float, float]], half_width: float,
-                       near: tuple[float, float, float] | None = None) -> float | None:
+    def nearest_within(self, points: list[tuple[float, float]],
+                       half_width: float) -> float | None:
         """The least ``project(x, y).distance`` of the ``points`` that lie within
-        ``half_width`` (m) of their lane's centre (None if none does), leaving out before
-        projecting it any point farther than ``near[2]`` (m) in a straight line from
-        (``near[0]``, ``near[1]``). The route's tiles are looked up by their indices
-        directly: a point off the grid is on none of them."""
+        ``half_width`` (m) of their lane's centre (None if none does). The route's tiles are
+        looked up by their indices directly: a point off the grid is on none of them."""
         size, top, on_tile, reach = self.map.tile_size, self.map.rows - 1, self._on_tile, self.reach
-        near_x, near_y, limit = near if near is not None else (0.0, 0.0, math.inf)
-        limit = limit ** 2  # inf: no point left out (squares of huge coordinates not taken)
         floor = math.floor
         nearest = None
         for x, y in points:
-            if limit < math.inf and (x - near_x) ** 2 + (y - near_y) ** 2 > limit:
-                continue
             found = on_tile.get((floor(x / size), top - floor(y / size)))
             if found is None:
                 continue
@@ -147,10 +141,14 @@ def distance_ahead(dmap: DuckietownMap, lane: Lane, along: float,
 
     A point farther than ``reach + half_width`` (m) in a straight line from the start cannot
     count (the lanes' length to its projection is at least the straight line there), so it is
-    left out before it is projected: the same answer, sooner."""
+    left out before it is projected, and without such points no route is followed: the same
+    answer, sooner."""
     start_x, start_y, _ = lane.point_at(along)
-    return Route(dmap, lane, along, reach).nearest_within(
-        points, half_width, (start_x, start_y, reach + half_width))
+    limit = (reach + half_width) ** 2
+    near = [(x, y) for x, y in points if (x - start_x) ** 2 + (y - start_y) ** 2 <= limit]
+    if not near:
+        return None
+    return Route(dmap, lane, along, reach).nearest_within(near, half_width)
 
 
 @dataclass(frozen=True)

@@ -364,8 +364,7 @@ class LaneKeeping(control.Task):
         below ``traffic.headway`` (m), else 0 (always 0 without traffic)."""
         if traffic is None:
             return 0.0
-        gap = self.traffic.headway(traffic, pose.lane, pose.along)
-        return 1.0 if gap is not None and gap < self.config.traffic.headway else 0.0
+        return 1.0 if self.traffic.within_headway(traffic, pose.lane, pose.along) else 0.0
 
     def _lane_cost(self, pose: LanePose) -> float:
         if not pose.on_road:

@@ -41,6 +41,7 @@ from crllk.tasks.follower import FollowerGains
 from crllk.tasks.following import (
     CORRIDOR_MARGIN,
     FOLLOW_GAP,
+    FOLLOW_TIME,
     FRONT,
     LOOKAHEAD,
     Mover,
@@ -57,6 +58,9 @@ ROADSIDE = 0.36
 VEHICLE_HEIGHT = OBJECT_SIZES["duckiebot"][2]
 """Height (m) of a Duckiebot's box in recordings."""
 _MAX_LATERAL_ACCELERATION = FollowerGains.max_lateral_acceleration
+_REACH_SLACK = 1e-9
+"""Added (m) to a reach shortened to where a farther point could no longer change the answer,
+so that rounding never leaves out a point that could."""
 
 
 @dataclass(frozen=True)
@@ -82,8 +86,9 @@ class Traffic:
         self.crossings = [crossing(dmap, column, row, ROADSIDE)
                           for column, row in config.pedestrians.crossings]
         self._lane_index = {lane: k for k, lane in enumerate(dmap.lanes)}
-        self._outlines: tuple[tuple, list[list[tuple[float, float]]]] = ((), [])
-        """The vehicles' positions (lane index, along) and outlines last measured."""
+        self._measured: tuple[tuple, list[Pose], list[list[tuple[float, float]]]] = ((), [], [])
+        """The vehicles' positions (lane index, along), axle poses and outlines last
+        measured."""
 
     @property
     def vehicles(self) -> int:
@@ -137,11 +142,12 @@ class Traffic:
         returns their :meth:`poses` after the step."""
         robot_box = duckiebot_box(*robot)
         robot_points = outline(robot_box)
-        before = self.poses(state)
-        boxes = _boxes(before, self.vehicles)
-        vehicle_boxes = boxes[:self.vehicles]
-        vehicle_points = list(self._vehicle_outlines(state))
-        pedestrian_points = [p for box in boxes[self.vehicles:] for p in outline(box)]
+        vehicle_poses, vehicle_points = self._measure(state)
+        before = vehicle_poses + self._pedestrian_poses(state)
+        vehicle_poses, vehicle_points = list(vehicle_poses), list(vehicle_points)
+        pedestrian_points = [p for pose in before[self.vehicles:]
+                             for p in outline(pedestrian_box(*pose))]
+        vehicle_boxes = []
         for k, vehicle in enumerate(state["vehicles"]):
             others = [p for j, points in enumerate(vehicle_points) if j != k for p in points]
             lane = self.map.lanes[vehicle[0]]
@@ -149,12 +155,13 @@ class Traffic:
                                         robot_points + others + pedestrian_points)
             lane, vehicle[1] = advance(self.map, lane, vehicle[1], speed * self.dt)
             vehicle[0] = self._lane_index[lane]
-            vehicle_boxes[k] = duckiebot_box(*lane.point_at(vehicle[1]))
+            vehicle_poses[k] = lane.point_at(vehicle[1])
+            vehicle_boxes.append(duckiebot_box(*vehicle_poses[k]))
             vehicle_points[k] = outline(vehicle_boxes[k])
-        self._outlines = (_positions(state), vehicle_points)
+        self._measured = (_positions(state), vehicle_poses, vehicle_points)
         for k, pedestrian in enumerate(state["pedestrians"]):
             self._walk(state["seed"], k, pedestrian, [robot_box, *vehicle_boxes])
-        after = self.poses(state)
+        after = vehicle_poses + self._pedestrian_poses(state)
         state["velocities"] = [[(x1 - x0) / self.dt, (y1 - y0) / self.dt]
                                for (x0, y0, _), (x1, y1, _) in zip(before, after, strict=True)]
         return after
@@ -165,8 +172,10 @@ class Traffic:
         speed = cruise
         if lane.curvature:
             speed = min(speed, math.sqrt(_MAX_LATERAL_ACCELERATION / abs(lane.curvature)))
+        # Beyond where following_speed reaches ``speed``, nothing ahead slows the vehicle.
+        binding = FRONT + FOLLOW_GAP + FOLLOW_TIME * speed + _REACH_SLACK
         ahead = distance_ahead(self.map, lane, along, points,
-                               C.FOOTPRINT_WIDTH / 2 + CORRIDOR_MARGIN, LOOKAHEAD)
+                               C.FOOTPRINT_WIDTH / 2 + CORRIDOR_MARGIN, min(LOOKAHEAD, binding))
         if ahead is not None:
             speed = min(speed, following_speed(ahead - FRONT, FOLLOW_GAP))
         return speed
@@ -192,10 +201,12 @@ class Traffic:
     # ----- poses and measures -----------------------------------------------------------
     def poses(self, state: dict[str, Any]) -> list[Pose]:
         """(x, y, yaw) of every mover: the vehicles' axles, then the pedestrians."""
-        vehicles = [self.map.lanes[lane].point_at(along) for lane, along, _ in state["vehicles"]]
-        pedestrians = [self.crossings[k].point_at(walked, side)
-                       for k, (side, walked, *_rest) in enumerate(state["pedestrians"])]
-        return vehicles + pedestrians
+        return self._measure(state)[0] + self._pedestrian_poses(state)
+
+    def _pedestrian_poses(self, state: dict[str, Any]) -> list[Pose]:
+        """(x, y, yaw) of every pedestrian."""
+        return [self.crossings[k].point_at(walked, side)
+                for k, (side, walked, *_rest) in enumerate(state["pedestrians"])]
 
     def boxes(self, state: dict[str, Any]) -> list[MapObject]:
         """Every mover's footprint box (with its height), in :meth:`poses`' order."""
@@ -212,20 +223,36 @@ class Traffic:
         """Gap (m) from the front of a robot at ``along`` on ``lane`` to the nearest vehicle
         whose footprint reaches into that lane ahead (within :data:`LOOKAHEAD` or the headway
         bound, whichever is longer), or None."""
+        return self._gap_ahead(state, lane, along, max(LOOKAHEAD, self.config.headway))
+
+    def within_headway(self, state: dict[str, Any], lane: Lane, along: float) -> bool:
+        """Whether :meth:`headway` is below the headway bound, measured no farther than the
+        bound reaches."""
+        bound = self.config.headway
+        gap = self._gap_ahead(state, lane, along, bound + _REACH_SLACK)
+        return gap is not None and gap < bound
+
+    def _gap_ahead(self, state: dict[str, Any], lane: Lane, along: float,
+                   reach: float) -> float | None:
+        """Gap (m) from the front of a robot at ``along`` on ``lane`` to the nearest vehicle
+        whose footprint reaches into that lane within ``reach`` (m) of the front, or None."""
         points = [p for vehicle in self._vehicle_outlines(state) for p in vehicle]
-        ahead = distance_ahead(self.map, lane, along, points, LANE_HALF_WIDTH,
-                               max(LOOKAHEAD, self.config.headway) + FRONT)
+        ahead = distance_ahead(self.map, lane, along, points, LANE_HALF_WIDTH, reach + FRONT)
         return None if ahead is None else ahead - FRONT
 
-    def _vehicle_outlines(self, state: dict[str, Any]) -> list[list[tuple[float, float]]]:
-        """Each vehicle's :func:`outline` where ``state`` has it (the last :meth:`step`'s,
-        unless the vehicles stand elsewhere)."""
-        positions, outlines = self._outlines
+    def _measure(self, state: dict[str, Any]) -> tuple[list[Pose], list[list[tuple[float, float]]]]:
+        """Each vehicle's axle pose and :func:`outline` where ``state`` has it (the last
+        :meth:`step`'s, unless the vehicles stand elsewhere)."""
+        positions, poses, outlines = self._measured
         if positions != _positions(state):
-            outlines = [outline(duckiebot_box(*self.map.lanes[lane].point_at(along)))
-                        for lane, along, _ in state["vehicles"]]
-            self._outlines = (_positions(state), outlines)
-        return outlines
+            poses = [self.map.lanes[lane].point_at(along) for lane, along, _ in state["vehicles"]]
+            outlines = [outline(duckiebot_box(*pose)) for pose in poses]
+            self._measured = (_positions(state), poses, outlines)
+        return poses, outlines
+
+    def _vehicle_outlines(self, state: dict[str, Any]) -> list[list[tuple[float, float]]]:
+        """Each vehicle's :func:`outline` where ``state`` has it."""
+        return self._measure(state)[1]
 
     def ahead(self, state: dict[str, Any], lane: Lane, along: float, count: int,
               reach: float) -> list[MoverAhead]:
