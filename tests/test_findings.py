@@ -513,3 +513,65 @@ def test_the_lane_target_rows_are_their_validation_evaluations():
               for _, run in LANE_TARGET_RUNS for k in (0, 1)]
     assert min(j_coll) > 0.02
     assert f"every run misses α2 (J_coll {min(j_coll):.4f}–{max(j_coll):.4f})" in text
+
+
+CLOSER_TEACHER_RUNS = tuple((f"CRLLK-D, `teacher.margin=0.05`, seed {seed}",
+                             f"CRLLK-D-curve4-margin5cm-a0.5-seed{seed}") for seed in (0, 1))
+CURVE_WEIGHT_C_RUNS = tuple((f"CRLLK-C, seed {seed}", f"CRLLK-C-curve4-a0.5-seed{seed}")
+                            for seed in (0, 1))
+"""The rows of the closer-teacher and CRLLK-C curve-weight trials: label and run directory."""
+
+
+def _endings(document: dict) -> int:
+    """Episodes of an evaluation that ended on an obstacle or off the road."""
+    return int(sum(e["cost_collision"] for e in document["episodes"]))
+
+
+def test_the_closer_teacher_and_crllk_c_curve_weight_rows_are_their_evaluations():
+    """The table of the two trials (``val400`` and ``val400-mode`` of each run, final
+    multipliers, the settings in each run's config) and the prose's counts against the curve
+    weight alone and against the default CRLLK-C on the same validation episodes."""
+    root = REPO / "results/runs/pixels/obstacle_loop"
+    text = " ".join(FINDINGS.split())
+    counts = {}
+    for label, run in CLOSER_TEACHER_RUNS + CURVE_WEIGHT_C_RUNS:
+        sampled, mode = _val400_pair(root / run)
+        multipliers = sampled["source"]["multipliers"]
+        assert (f"| {label} | {_val400_cell(sampled)} | {_val400_cell(mode)} | "
+                f"{multipliers['lane']:.2f} / {multipliers['collision']:.1f} |") in FINDINGS
+        config = (root / run / "config.yaml").read_text()
+        assert "encounter_curve_weight: 4.0" in config
+        assert ("margin: 0.05" in config) == ("margin5cm" in run)
+        counts[run] = (_endings(sampled), _endings(mode), mode["summary"]["J_clane"])
+    closer = [counts[run] for _, run in CLOSER_TEACHER_RUNS]
+    alone = [tuple(map(_endings, _val400_pair(root / f"CRLLK-D-curve4-a0.5-seed{s}")))
+             for s in (0, 1)]
+    alone_mode = json.loads((root / "CRLLK-D-curve4-a0.5-seed0/val400-mode.json").read_text())
+    assert closer[0][2] > alone_mode["summary"]["J_clane"] > 0.5
+    assert (f"Seed 0 ended {closer[0][0]} of its 400 sampled episodes on an obstacle or off the "
+            f"road (against {alone[0][0]} with the 7 cm teacher) and its mode none, but that "
+            f"mode deviates {closer[0][2]:.3f} dm, further beyond α1 than with the 7 cm "
+            f"teacher ({alone_mode['summary']['J_clane']:.3f} dm)") in text and closer[0][1] == 0
+    assert (f"seed 1 ended {closer[1][0]} of its sampled episodes and {closer[1][1]} of its "
+            f"mode's that way, against {alone[1][0]} and {alone[1][1]}") in text
+    trial = [counts[run] for _, run in CURVE_WEIGHT_C_RUNS]
+    default = [(json.loads((root / f"CRLLK-C-a0.5-seed{s}" / "eval-400.json").read_text()),
+                json.loads((root / f"CRLLK-C-a0.5-seed{s}" / "val400-mode.json").read_text()))
+               for s in (0, 1)]
+    for sampled, mode in default:
+        for document, deterministic in ((sampled, False), (mode, True)):
+            assert document["evaluation"]["seed"] == 1_000_000
+            assert document["evaluation"]["episodes"] == 400
+            assert document["evaluation"]["deterministic"] is deterministic
+    assert (f"{trial[0][0]} and {trial[1][0]} of its 400 sampled episodes ended on an obstacle "
+            f"or off the road, against {_endings(default[0][0])} and {_endings(default[1][0])} "
+            f"for the default CRLLK-C") in text
+    assert (f"{trial[0][1]} and {trial[1][1]} of its mode's, against {_endings(default[0][1])} "
+            f"and {_endings(default[1][1])}") in text
+    curve_duckie = "3 duckie (0.88, 0.88)"
+    hits = [d[0]["breakdown"]["collisions_by_object"] for d in default]
+    assert (f"hit it in {hits[0][curve_duckie]} of {_endings(default[0][0])} and "
+            f"{hits[1][curve_duckie]} of {_endings(default[1][0])} such episodes") in text
+    others = {name for h in hits for name in h if name != curve_duckie}
+    assert f"the rest spread over {['no', 'one', 'two', 'three', 'four', 'five'][len(others)]} " \
+           "other obstacles" in text
