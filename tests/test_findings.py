@@ -552,8 +552,12 @@ def test_the_closer_teacher_and_crllk_c_curve_weight_rows_are_their_evaluations(
             f"road (against {alone[0][0]} with the 7 cm teacher) and its mode none, but that "
             f"mode deviates {closer[0][2]:.3f} dm, further beyond α1 than with the 7 cm "
             f"teacher ({alone_mode['summary']['J_clane']:.3f} dm)") in text and closer[0][1] == 0
-    assert (f"seed 1 ended {closer[1][0]} of its sampled episodes and {closer[1][1]} of its "
-            f"mode's that way, against {alone[1][0]} and {alone[1][1]}") in text
+    alone_mode1 = json.loads((root / "CRLLK-D-curve4-a0.5-seed1/val400-mode.json").read_text())
+    assert closer[1][2] <= 0.5
+    assert (f"seed 1's mode held α1 ({closer[1][2]:.3f} dm, against "
+            f"{alone_mode1['summary']['J_clane']:.3f}), but seed 1 ended {closer[1][0]} of its "
+            f"sampled episodes and {closer[1][1]} of its mode's that way, against "
+            f"{alone[1][0]} and {alone[1][1]}") in text
     trial = [counts[run] for _, run in CURVE_WEIGHT_C_RUNS]
     default = [(json.loads((root / f"CRLLK-C-a0.5-seed{s}" / "eval-400.json").read_text()),
                 json.loads((root / f"CRLLK-C-a0.5-seed{s}" / "val400-mode.json").read_text()))
@@ -573,5 +577,15 @@ def test_the_closer_teacher_and_crllk_c_curve_weight_rows_are_their_evaluations(
     assert (f"hit it in {hits[0][curve_duckie]} of {_endings(default[0][0])} and "
             f"{hits[1][curve_duckie]} of {_endings(default[1][0])} such episodes") in text
     others = {name for h in hits for name in h if name != curve_duckie}
-    assert f"the rest spread over {['no', 'one', 'two', 'three', 'four', 'five'][len(others)]} " \
-           "other obstacles" in text
+    rest = [sum(h.values()) - h[curve_duckie] for h in hits]
+    off_road = [d[0]["terminations"].get("off_road", 0) for d in default]
+    assert [sum(h.values()) + o for h, o in zip(hits, off_road, strict=True)] == \
+        [_endings(d[0]) for d in default]  # collisions and off-road endings make up the count
+    assert (f"the other {rest[0]} and {rest[1]} collisions were with "
+            f"{['no', 'one', 'two', 'three', 'four', 'five'][len(others)]} other obstacles "
+            f"between them, and {off_road[0]} and {off_road[1]} episodes left the road") in text
+    weighted = [json.loads((root / run / "val400.json").read_text())["breakdown"]
+                ["collisions_by_object"][curve_duckie] for _, run in CURVE_WEIGHT_C_RUNS]
+    assert (f"seed 0's sampled policy hit it {weighted[0]} times with the weight, against "
+            f"{hits[0][curve_duckie]} without (seed 1: {weighted[1]} against "
+            f"{hits[1][curve_duckie]})") in text

@@ -160,14 +160,14 @@ def test_restored_env_steps_identically_with_randomization(build):
 def test_traffic_with_randomization_is_seeded_and_restores_exactly(build, task):
     """With movers and ``randomize=default``: the same seed gives the same draws, traffic and
     images; a snapshot restored into another env steps on identically, through a reset; and
-    the randomisation shows in the images."""
+    each simulation draws a variation of its own."""
     a, b = build(DEFAULT, seed=5, task=task), build(DEFAULT, seed=5, task=task)
     first, second = a.reset(), b.reset()
     assert [t.episode.variation for t in a.tasks] == [t.episode.variation for t in b.tasks]
     assert [t.episode.traffic for t in a.tasks] == [t.episode.traffic for t in b.tasks]
     assert torch.equal(first["pixels"], second["pixels"])
-    plain = build({"horizon": 30}, seed=5, task=task)
-    assert np.abs(plain.reset()["pixels"].numpy().astype(int) - first["pixels"].numpy()).mean() > 5
+    variations = [t.episode.variation for t in a.tasks]
+    assert None not in variations and variations[0] != variations[1]
     generator = torch.Generator().manual_seed(3)
     _, carried = drive(a, random_actions(a, 20, generator), first)
     snapshot = a.sim_state()

@@ -104,7 +104,7 @@ def test_where_the_time_goes_is_the_committed_measurement():
 
 def test_the_traffic_rounds_are_the_committed_measurements():
     """The range of the traffic figure timed in turns against the code before the last
-    speed-ups, per commit, and the drift of the rate without movers, from the committed
+    speed-up, per commit, and the drift of the rate without movers, from the committed
     rounds."""
     ratios: dict[str, list[float]] = {}
     plain: list[float] = []
@@ -129,13 +129,17 @@ def test_the_traffic_rounds_are_the_committed_measurements():
 def test_the_traffic_throughput_is_the_committed_measurement():
     """The Benchmarks page's traffic ratios (the batched pixel env with movers against the same
     task without them), from the committed bench output."""
-    ratios, task = {}, None
+    ratios, plain, task = {}, {}, None
     for line in (REPO / "results/bench/traffic.txt").read_text().splitlines():
         if line.startswith("task "):
             task = Path(line.split()[1].rstrip(",")).stem
         elif line.startswith("make_env pixels with traffic"):
             ratios[task] = float(line.split()[-3])
-    assert set(ratios) == {"traffic_loop", "pedestrian_loop"}
+        elif line.startswith("make_env pixels without movers"):
+            plain[task] = float(line.split()[-1])
+    assert set(ratios) == set(plain) == {"traffic_loop", "pedestrian_loop"}
     text = prose("benchmarks.md")
     for task, ratio in ratios.items():
         assert f"`{task}` {ratio:.2f}" in text
+    assert (f"its rate without movers was low in that run: {plain['pedestrian_loop']:,.0f} "
+            f"steps/s, against {plain['traffic_loop']:,.0f} in `traffic_loop`'s") in text

@@ -483,34 +483,38 @@ def test_shortened_reaches_give_the_full_reach_answers():
     dmap, bound = config.map, config.traffic.headway
     rng = np.random.default_rng(7)
     slowed = signalled = 0
+    behind_axle = C.FOOTPRINT_LENGTH / 2 + C.FOOTPRINT_CENTRE_BEHIND_AXLE
+    """From a vehicle's axle back to the rear of its footprint (m)."""
     for _ in range(400):
         lane = dmap.lanes[int(rng.integers(len(dmap.lanes)))]
         along, cruise = float(rng.uniform(0.0, lane.length)), float(rng.uniform(0.05, 0.4))
-        gaps = [*rng.uniform(0.0, 1.3, 6).tolist(),  # and at the edges of both reaches
-                FRONT + FOLLOW_GAP + cruise, bound + FRONT, bound + FRONT - 1e-12]
+        capped = cruise
+        if lane.curvature:
+            capped = min(capped, math.sqrt(FollowerGains.max_lateral_acceleration
+                                           / abs(lane.curvature)))
+        edge = FRONT + FOLLOW_GAP + capped  # where following_speed reaches the capped speed
+        gaps = [*rng.uniform(0.0, 1.3, 6).tolist(), edge, edge - 1e-12, edge + 1e-12]
         points = []
         for gap in gaps:
             ahead_lane, ahead_along = advance(dmap, lane, along, gap)
             points.append(ahead_lane.point_at(ahead_along, float(rng.uniform(-0.12, 0.12)))[:2])
         full = distance_ahead(dmap, lane, along, points, C.FOOTPRINT_WIDTH / 2 + CORRIDOR_MARGIN,
                               LOOKAHEAD)
-        expected = cruise
-        if lane.curvature:
-            expected = min(expected, math.sqrt(FollowerGains.max_lateral_acceleration
-                                               / abs(lane.curvature)))
+        expected = capped
         if full is not None:
             slowed += following_speed(full - FRONT, FOLLOW_GAP) < expected
             expected = min(expected, following_speed(full - FRONT, FOLLOW_GAP))
         assert traffic._vehicle_speed(lane, along, cruise, points) == expected
-        state = {"vehicles": [[dmap.lanes.index(ahead_lane), ahead_along, 0.1]]}
-        ahead_lane, ahead_along = advance(dmap, lane, along, gaps[0] + FRONT)
-        state["vehicles"][0][:2] = [dmap.lanes.index(ahead_lane), ahead_along]
-        full_gap = distance_ahead(dmap, lane, along, traffic._vehicle_outlines(state)[0],
-                                  LANE_HALF_WIDTH, max(LOOKAHEAD, bound) + FRONT)
-        signal = full_gap is not None and full_gap - FRONT < bound
-        signalled += signal
-        assert traffic.within_headway(state, lane, along) == signal
-    assert slowed > 20 and signalled > 20  # both reaches were exercised
+        for gap in (float(rng.uniform(0.0, 0.8)), bound, bound - 1e-12, bound + 1e-12):
+            # a vehicle whose rear is about ``gap`` ahead of the robot's front
+            ahead_lane, ahead_along = advance(dmap, lane, along, gap + FRONT + behind_axle)
+            state = {"vehicles": [[dmap.lanes.index(ahead_lane), ahead_along, 0.1]]}
+            full_gap = distance_ahead(dmap, lane, along, traffic._vehicle_outlines(state)[0],
+                                      LANE_HALF_WIDTH, max(LOOKAHEAD, bound) + FRONT)
+            signal = full_gap is not None and full_gap - FRONT < bound
+            signalled += signal
+            assert traffic.within_headway(state, lane, along) == signal, (gap, full_gap)
+    assert slowed > 20 and signalled > 100  # both reaches were exercised
 
 
 def test_scenes_with_movers_draw_curves_coarser_and_others_as_before():

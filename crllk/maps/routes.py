@@ -141,8 +141,8 @@ def distance_ahead(dmap: DuckietownMap, lane: Lane, along: float,
 
     A point farther than ``reach + half_width`` (m) in a straight line from the start cannot
     count (the lanes' length to its projection is at least the straight line there), so it is
-    left out before it is projected, and without such points no route is followed: the same
-    answer, sooner."""
+    left out before it is projected, and when no point is that near, no route is built: the
+    same answer, sooner."""
     start_x, start_y, _ = lane.point_at(along)
     limit = (reach + half_width) ** 2
     near = [(x, y) for x, y in points if (x - start_x) ** 2 + (y - start_y) ** 2 <= limit]

@@ -139,12 +139,12 @@ class Traffic:
     def step(self, state: dict[str, Any], robot: Pose) -> list[Pose]:
         """Move every mover one control step, with the robot at ``robot`` (axle pose), and
         keep their velocities (m/s, world frame) over the step in ``state["velocities"]``;
-        returns their :meth:`poses` after the step."""
+        returns their :meth:`poses` after the step (the vehicles' as :meth:`_measure` has
+        them: a subclass that overrides :meth:`poses` overrides this too)."""
         robot_box = duckiebot_box(*robot)
         robot_points = outline(robot_box)
-        vehicle_poses, vehicle_points = self._measure(state)
+        vehicle_poses, vehicle_points = map(list, self._measure(state))  # copies, changed below
         before = vehicle_poses + self._pedestrian_poses(state)
-        vehicle_poses, vehicle_points = list(vehicle_poses), list(vehicle_points)
         pedestrian_points = [p for pose in before[self.vehicles:]
                              for p in outline(pedestrian_box(*pose))]
         vehicle_boxes = []
@@ -173,9 +173,10 @@ class Traffic:
         if lane.curvature:
             speed = min(speed, math.sqrt(_MAX_LATERAL_ACCELERATION / abs(lane.curvature)))
         # Beyond where following_speed reaches ``speed``, nothing ahead slows the vehicle.
-        binding = FRONT + FOLLOW_GAP + FOLLOW_TIME * speed + _REACH_SLACK
+        slowing_reach = FRONT + FOLLOW_GAP + FOLLOW_TIME * speed + _REACH_SLACK
         ahead = distance_ahead(self.map, lane, along, points,
-                               C.FOOTPRINT_WIDTH / 2 + CORRIDOR_MARGIN, min(LOOKAHEAD, binding))
+                               C.FOOTPRINT_WIDTH / 2 + CORRIDOR_MARGIN,
+                               min(LOOKAHEAD, slowing_reach))
         if ahead is not None:
             speed = min(speed, following_speed(ahead - FRONT, FOLLOW_GAP))
         return speed
@@ -222,7 +223,8 @@ class Traffic:
     def headway(self, state: dict[str, Any], lane: Lane, along: float) -> float | None:
         """Gap (m) from the front of a robot at ``along`` on ``lane`` to the nearest vehicle
         whose footprint reaches into that lane ahead (within :data:`LOOKAHEAD` or the headway
-        bound, whichever is longer), or None."""
+        bound, whichever is longer), or None: the measure itself (the headway signal needs
+        only :meth:`within_headway`)."""
         return self._gap_ahead(state, lane, along, max(LOOKAHEAD, self.config.headway))
 
     def within_headway(self, state: dict[str, Any], lane: Lane, along: float) -> bool:
