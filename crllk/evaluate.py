@@ -12,10 +12,13 @@
 Each run's checkpoint plays ``episodes`` seeded episodes (episode k in sub-environment
 k mod ``num_envs``, spawns from ``seed``, by default the run's evaluation seed, never a
 training seed) with its policy as trained: actions are sampled, from a torch generator seeded
-with the same seed, so the numbers are reproducible (``deterministic=true`` takes the policy's
-mode instead). The multipliers enforce the constraints on the sampled policy, the one PPO
-trains; its mode is another policy, and with three discrete actions a much worse one: a policy
-that steers by mixing turns and straight steps loses the mix. The result goes
+with the same seed, so the numbers are reproducible. ``deterministic=true`` plays the deployed
+policy instead, the one ``crllk.export`` writes: a continuous policy's mode, and a discrete
+policy's expected wheel duties (its three duty pairs weighted by their probabilities,
+:mod:`crllk.rl.expected_duty`). The multipliers enforce the constraints on the sampled
+policy, the one PPO trains; the most probable of three discrete actions would be another
+policy, and a much worse one: a policy that steers by mixing turns and straight steps loses
+the mix, which its expected duties keep. The result goes
 to ``<run>/eval.json``: J_R (m), J_clane (dm), J_coll, episode length, the action histogram,
 termination reasons and one row per episode. Several runs also print (and with ``out=`` write)
 mean ± std across runs, the paper's way of reporting seeds. ``record=true`` also records

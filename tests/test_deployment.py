@@ -24,7 +24,7 @@ from crllk.images import box_average
 from crllk.tasks.actions import action_duty
 from crllk.tasks.frames import crop_to_aspect, policy_image
 from crllk.training.build import build_env
-from crllk.training.runs import load_actor, load_run_config
+from crllk.training.runs import load_actor, load_run_config, played_action
 
 RECORDED = 1008
 """Observations per parity check: 16 simulations x 63 steps."""
@@ -46,10 +46,11 @@ def exported(request, tmp_path_factory):
 
 
 def _recorded_observations(run, count: int = RECORDED):
-    """Observations of the run's task from a rollout of its own deterministic policy, with the
-    actor's actions as its deterministic exploration gives them."""
+    """Observations of the run's task from a rollout of its own deployed policy, with the
+    actions it plays in evaluation (a discrete run's expected duties, in a duty env), and the
+    action type they are in."""
     config = load_run_config(run)
-    env = build_env(config, num_envs=16, seed=7)
+    env = build_env(config, num_envs=16, seed=7, action=played_action(config, True))
     actor, _ = load_actor(run, env)
     observations, actions = [], []
     td = env.reset()
@@ -60,25 +61,22 @@ def _recorded_observations(run, count: int = RECORDED):
             actions += list(td["action"].unbind(0))
             td = step_mdp(env.step(td))
     env.close()
-    return observations, actions, config.action.name
+    return observations, actions, env.action_type
 
 
 def test_onnx_actions_equal_pytorch_on_recorded_observations(exported):
-    run, _, action = exported
+    run, _, _ = exported
     policy, _ = deployed_policy(run)
     session = onnxruntime.InferenceSession(str(run / "policy.onnx"))
-    observations, actor_actions, _ = _recorded_observations(run)
+    observations, actor_actions, action = _recorded_observations(run)
     assert len(observations) >= 1000
     with torch.no_grad():
         torch_duty = np.stack([policy(o).numpy() for o in observations])
     onnx_duty = np.stack([session.run(None, {"observation": o.numpy()})[0]
                           for o in observations])
     actor_duty = np.array([action_duty(action, a.numpy()) for a in actor_actions])
-    if action == "discrete":
-        np.testing.assert_array_equal(onnx_duty, torch_duty)
-    else:
-        assert np.abs(onnx_duty - torch_duty).max() <= 1e-5
-    # the exported network is the actor's deterministic policy
+    assert np.abs(onnx_duty - torch_duty).max() <= 1e-5
+    # the exported network is the policy the evaluation of the deployed policy plays
     assert np.abs(torch_duty - actor_duty).max() <= 1e-6
     assert onnx_duty.shape == (len(observations), 2)
 

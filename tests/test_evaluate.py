@@ -91,7 +91,37 @@ def test_sampled_evaluation_is_seeded(tiny_run):
     assert [r["actions"] for r in first["episodes"]] == [r["actions"] for r in second["episodes"]]
     mode = evaluate_run(tiny_run, episodes=4, num_envs=2, seed=3, deterministic=True)
     assert mode["evaluation"]["deterministic"] is True
-    assert [r["actions"] for r in mode["episodes"]] != [r["actions"] for r in first["episodes"]]
+    assert mode["summary"] != first["summary"]
+
+
+def test_a_discrete_run_deploys_its_expected_duties(tiny_run):
+    """The tiny discrete run's deployed policy plays in a duty env: each command is its
+    probabilities' mean of the three duty pairs; its evaluation says so, plays the same
+    episodes again and histograms the wheel duties, all within the pairs' range."""
+    from crllk.tasks.actions import DISCRETE_DUTIES
+    from crllk.training.build import build_env
+    from crllk.training.runs import load_run_config, played_action
+
+    config = load_run_config(tiny_run)
+    assert config.action.name == "discrete"
+    assert played_action(config, False) == "discrete" and played_action(config, True) == "duty"
+    env = build_env(config, num_envs=2, seed=3, action="duty")
+    try:
+        policy, _ = load_actor(tiny_run, env)
+        td = policy(env.reset())
+        duties = torch.tensor(DISCRETE_DUTIES, dtype=torch.float32)
+        assert torch.allclose(td["action"], torch.softmax(td["logits"], -1) @ duties)
+    finally:
+        env.close()
+    mode = evaluate_run(tiny_run, episodes=4, num_envs=2, seed=3, deterministic=True)
+    again = evaluate_run(tiny_run, episodes=4, num_envs=2, seed=3, deterministic=True,
+                         name="again")
+    assert mode["evaluation"]["deployed"] == "expected_duty"
+    assert again["episodes"] == mode["episodes"]
+    histogram = mode["action_histogram"]
+    assert DISCRETE_DUTIES.min() <= histogram["left_mean"] <= DISCRETE_DUTIES.max()
+    assert sum(histogram["left"]) == sum(r["length"] for r in mode["episodes"])
+    assert "actions" not in mode["episodes"][0]
 
 
 def test_aggregate_is_mean_and_population_std_across_runs():

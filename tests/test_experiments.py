@@ -32,15 +32,21 @@ def test_table1_lists_every_agent_beside_the_paper(tiny_experiments):
         assert test["evaluation"]["seed"] == TEST_SEED
         assert entry["J_clane"]["values"] == [test["summary"]["J_clane"]]
         assert entry["frames"] == [16]
-        # the deployed policy, its mode, played through the same test episodes
+        # the deployed policy (a discrete agent's expected duties, a continuous agent's
+        # mode), played through the same test episodes
         mode = json.loads((run / f"{MODE_EVALUATION}.json").read_text())
         assert mode["evaluation"]["deterministic"] is True
+        assert mode["evaluation"]["deployed"] == (
+            "expected_duty" if agent.endswith("-D") else "mode")
+        assert entry["mode"]["deployed"] == [mode["evaluation"]["deployed"]]
         assert mode["evaluation"]["seed"] == TEST_SEED
         assert entry["mode"]["J_coll"]["values"] == [mode["summary"]["J_coll"]]
     markdown = (results / "table1.md").read_text()
     assert markdown == table_markdown(document)
-    assert "| J_coll, deployed policy (mode) |" in markdown
-    assert "CRLLK-D's deployed policy (mode)" in markdown
+    assert "| J_coll, deployed policy |" in markdown
+    assert "CRLLK-D's deployed policy (expected duties)" in markdown
+    assert "CRLLK-C's deployed policy (mode)" in markdown
+    assert "a discrete agent's expected wheel duties" in markdown
     assert "Budget: 16 environment frames per run" in markdown
     assert "Observation: `pixels`" in markdown and "python -m crllk.experiments all" in markdown
     assert "| J_clane (paper) | 0.66 ± 0.02 | 0.99 ± 0.07 | 0.31 ± 0.00 | 1.04 ± 0.25 | |" \
@@ -254,7 +260,7 @@ def test_runs_validate_on_the_validation_seed_and_the_tables_test_on_the_test_se
     """The trainer's evaluations (eval.csv, eval.json) use the validation seed; each finished
     run is evaluated once more on the test seed, sampled and mode, and only that is tabulated."""
     runs, _, stdout = tiny_experiments
-    assert "test evaluation of 4 of 4 runs, and of the deployed policy (mode) of 4" in stdout
+    assert "test evaluation of 4 of 4 runs, and of the deployed policy of 4" in stdout
     run = runs / "small_loop" / "CRLLK-D-a0.5-seed0"
     assert read_eval_json(run)["evaluation"] == {"episodes": 2, "seed": VALIDATION_SEED,
                                                  "num_envs": 10, "deterministic": False}
@@ -315,6 +321,29 @@ def test_a_finished_run_without_its_checkpoint_is_reused(tiny_experiments, tmp_p
     assert trained_frames(kept) == 16  # from eval.json
     assert evaluation_is_current(kept, Settings(frames=16, episodes=2), TEST_EVALUATION)
     assert trained_frames(tmp_path / "nothing") == 0
+
+
+def test_a_discrete_mode_evaluated_before_expected_duties_is_not_current(tiny_experiments,
+                                                                        tmp_path):
+    """The deployed policy of a discrete run is its expected duties: its test-mode evaluation
+    written before (the argmax, no ``deployed`` in its settings) is evaluated again; a
+    continuous run's mode, the same policy as before, stays current."""
+    import shutil
+
+    from crllk.experiments.runs import Settings, evaluation_is_current
+
+    runs, _, _ = tiny_experiments
+    settings = Settings(frames=16, episodes=2)
+    for agent, current_without in (("CRLLK-D", False), ("CRLLK-C", True)):
+        kept = tmp_path / agent
+        shutil.copytree(runs / "small_loop" / f"{agent}-a0.5-seed0", kept)
+        assert evaluation_is_current(kept, settings, MODE_EVALUATION, deterministic=True)
+        path = kept / f"{MODE_EVALUATION}.json"
+        document = json.loads(path.read_text())
+        del document["evaluation"]["deployed"]
+        path.write_text(json.dumps(document))
+        assert evaluation_is_current(kept, settings, MODE_EVALUATION,
+                                     deterministic=True) is current_without
 
 
 def test_a_run_trained_before_policy_files_gets_one_from_its_checkpoint(tiny_experiments,

@@ -3,7 +3,8 @@
     python -m crllk.analysis.endings RUN_DIR [--episodes 100] [--seconds 2] [--deterministic]
 
 An evaluation counts how often a policy leaves the road; this command shows how. It plays
-``episodes`` episodes of the run's policy (sampled, or its mode with ``--deterministic``) from
+``episodes`` episodes of the run's policy (sampled, or its deployed policy with
+``--deterministic``, :func:`crllk.training.runs.played_action`) from
 the validation spawn seed, never the test seed (episode k in simulation k mod N, each
 simulation's first episodes, as an evaluation assigns them), keeps the last ``seconds`` of
 every episode that ends off the road or on a collision, and reports for each: where it ended
@@ -114,10 +115,11 @@ def play_endings(run_dir: Path, episodes: int, seconds: float,
     from crllk.rl.rollout import Rollout, episode_quotas
     from crllk.tasks.actions import action_duty
     from crllk.training.build import build_env
-    from crllk.training.runs import load_actor
+    from crllk.training.runs import load_actor, played_action
 
     config = evaluation_config(run_dir)
-    env = build_env(config, num_envs=min(SIMULATIONS, episodes), seed=VALIDATION_SEED)
+    env = build_env(config, num_envs=min(SIMULATIONS, episodes), seed=VALIDATION_SEED,
+                    action=played_action(config, deterministic))
     quotas = episode_quotas(episodes, env.num_envs).tolist()
     try:
         actor, _ = load_actor(run_dir, env)

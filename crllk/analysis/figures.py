@@ -25,7 +25,13 @@ from crllk.files import atomic_write
 from crllk.protocol import TEST_EVALUATION, TEST_MODE_EVALUATION
 from crllk.tasks.actions import DISCRETE_NAMES
 from crllk.training.build import build_env
-from crllk.training.runs import load_actor, load_run_config, read_eval_json, read_metrics
+from crllk.training.runs import (
+    load_actor,
+    load_run_config,
+    played_action,
+    read_eval_json,
+    read_metrics,
+)
 
 SMOOTHING_ITERATIONS = 10
 """Window (iterations) of the moving average over training curves."""
@@ -89,15 +95,15 @@ def save_figure(figure: Any, path: Path) -> Path:
 def policy_trajectory(run_dir: str | Path, *, seed: int | None = None,
                       deterministic: bool = False) -> dict[str, Any]:
     """One episode of the run's policy (sampled from a generator seeded with ``seed``, as the
-    evaluation plays it, or its mode with ``deterministic``) from spawn ``seed`` (default: the
-    run's evaluation seed): the top-down picture with the driven trail (PIL image), the trail
-    (x, y in m), the per-step actions and lane costs, the distance (m) and the termination
-    reason."""
+    evaluation plays it, or the deployed policy with ``deterministic``) from spawn ``seed``
+    (default: the run's evaluation seed): the top-down picture with the driven trail (PIL
+    image), the trail (x, y in m), the per-step actions and lane costs, the distance (m) and
+    the termination reason."""
     from crllk.analysis.pictures import topdown
 
     config = load_run_config(run_dir)
     seed = config.eval.seed if seed is None else seed
-    env = build_env(config, num_envs=1, seed=seed)
+    env = build_env(config, num_envs=1, seed=seed, action=played_action(config, deterministic))
     try:
         actor, _ = load_actor(run_dir, env)
         physics, task = env.physics[0], env.tasks[0]
@@ -127,7 +133,7 @@ def figure1_data(by_threshold: Mapping[float, Sequence[Path]],
     """Everything Figure 1 draws, from the run directories: per lane threshold the learning
     curves (mean and range over seeds of the smoothed training metrics), the action counts of
     one test episode (evaluation episode 0 of the first seed) and the test evaluations of the
-    sampled policy and, where made, of the deployed one (its mode)."""
+    sampled policy and, where made, of the deployed one."""
     data: dict[str, Any] = {"settings": dict(settings), "thresholds": {}}
     for threshold, run_dirs in by_threshold.items():
         curves = {}

@@ -4,7 +4,9 @@ The graph has one input, ``observation`` (uint8 ``[30, 40, 3]`` RGB for pixel ru
 40, 3 * history]`` with a frame history, float32 ``[F]`` state features for state runs), and one
 output, ``duty`` (float32 ``[2]``: left and right wheel duty cycles in [-1, 1]). What the pilot
 needs to feed it is in the model's metadata: ``crllk.observation``, ``crllk.action``,
-``crllk.observation_shape``, ``crllk.history`` (images and steps between them),
+``crllk.deployed`` (``expected_duty`` or ``mode``: how the policy turns its action
+distribution into duties), ``crllk.observation_shape``, ``crllk.history`` (images and steps
+between them),
 ``crllk.supersample`` (how much larger training rendered each image before averaging it down),
 and where it comes from (``crllk.task``, ``crllk.run``, ``crllk.iteration``, ``crllk.frames``).
 """
@@ -26,7 +28,7 @@ from crllk.deployment.onnx_names import INPUT, METADATA_PREFIX, OUTPUT
 from crllk.deployment.policy import DeployedPolicy
 from crllk.files import atomic_write
 from crllk.training.build import build_env
-from crllk.training.runs import load_actor, load_run_config
+from crllk.training.runs import deployed_form, load_actor, load_run_config
 
 OPSET = 18
 
@@ -43,6 +45,7 @@ def deployed_policy(run_dir: str | Path) -> tuple[DeployedPolicy, dict[str, Any]
         env.close()
     policy = DeployedPolicy(actor, config.action.name).eval()
     metadata = {"observation": config.obs.name, "action": config.action.name,
+                "deployed": deployed_form(config.action.name),
                 "observation_shape": json.dumps(list(shape)),
                 "history": json.dumps([config.obs.history, config.obs.history_stride]),
                 "supersample": str(supersample),

@@ -116,6 +116,8 @@ class ParallelLaneKeepingEnv(MirroredTeacherFlag, EnvBase):
         self.constraints = self.config.constraints
         self.cost_keys = tuple(c.cost_key for c in self.constraints)
         self._teacher_active = bool(first["teacher_active"])
+        self.action_type: str = first["action_type"]
+        """The workers' action type (:data:`crllk.tasks.actions.ACTIONS`)."""
         flat = torch.Size([self.num_envs])
         self.observation_spec = _flatten(first["observation_spec"], workers, flat)
         self.action_spec = _flatten(first["action_spec"], workers, flat)
@@ -259,6 +261,7 @@ def _serve(pipe: Connection, create_env_fn: Callable[..., BatchedLaneKeepingEnv]
         env = create_env_fn(**kwargs)
         pipe.send(("ok", {"num_envs": env.num_envs, "config": env.config,
                           "teacher_active": env.teacher_active,
+                          "action_type": env.action_type,
                           "observation_spec": env.observation_spec,
                           "action_spec": env.action_spec, "reward_spec": env.reward_spec,
                           "done_spec": env.done_spec}))

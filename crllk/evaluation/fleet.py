@@ -37,7 +37,12 @@ from crllk.config import TrainConfig
 from crllk.envs.batched import TERMINATIONS, BatchedLaneKeepingEnv
 from crllk.envs.episodes import EpisodeAccumulator, EpisodeStats
 from crllk.errors import ConfigError
-from crllk.evaluation.runs import evaluation_config, result_path, write_evaluation
+from crllk.evaluation.runs import (
+    evaluation_config,
+    policy_settings,
+    result_path,
+    write_evaluation,
+)
 from crllk.files import output_lock
 from crllk.maps.obstacles import footprint_gap
 from crllk.rl.import_probes import settle_import_probes
@@ -49,7 +54,7 @@ from crllk.tasks.traffic import duckiebot_box
 from crllk.tasks.traffic_config import MIN_VEHICLE_DISTANCE, START_SPACING, TrafficConfig
 from crllk.training.build import build_env
 from crllk.training.run_dir import FLEET_FILE
-from crllk.training.runs import load_actor
+from crllk.training.runs import load_actor, played_action
 
 MAX_ROBOTS = MAX_FLEET
 """The most robots a fleet evaluation puts on a map."""
@@ -118,7 +123,8 @@ def evaluate_fleet(run_dir: str | Path, *, robots: int, episodes: int,
     config = fleet_config(run_dir, robots, overrides)
     seed = config.eval.seed if seed is None else seed
     with output_lock(result_path(run_dir, name)):
-        env = build_env(config, num_envs=robots, seed=seed)
+        env = build_env(config, num_envs=robots, seed=seed,
+                        action=played_action(config, deterministic))
         try:
             board = join_fleet(env)
             actor, info = load_actor(run_dir, env)
@@ -135,8 +141,9 @@ def evaluate_fleet(run_dir: str | Path, *, robots: int, episodes: int,
                          "hit_robots": hit_robots}
         return write_evaluation(
             run_dir, config, env, result, info,
-            settings={"episodes": episodes * robots, "fleet_episodes": episodes,
-                      "robots": robots, "seed": seed, "deterministic": deterministic},
+            settings=policy_settings(config, deterministic, {
+                "episodes": episodes * robots, "fleet_episodes": episodes, "robots": robots,
+                "seed": seed}),
             overrides=overrides, name=name, extra={"fleet": fleet_section})
 
 

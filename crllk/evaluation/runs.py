@@ -25,7 +25,13 @@ from crllk.tasks.config import load_task_config
 from crllk.tasks.follower import FollowerGains, FollowerPolicy
 from crllk.training.build import build_env, build_eval_env
 from crllk.training.run_dir import EVAL_RECORDING
-from crllk.training.runs import EVAL_FILE, load_actor, load_run_config
+from crllk.training.runs import (
+    EVAL_FILE,
+    deployed_form,
+    load_actor,
+    load_run_config,
+    played_action,
+)
 
 EVALUATION_ENVS = 10
 """Simulations of an evaluation (episode k runs in simulation k mod this): ``crllk.evaluate``'s
@@ -116,7 +122,8 @@ def evaluate_run(run_dir: str | Path, *, episodes: int, deterministic: bool = Fa
     config = evaluation_config(run_dir, overrides, workers)
     seed = config.eval.seed if seed is None else seed
     with output_lock(result_path(run_dir, name)):
-        env = build_eval_env(config, num_envs=num_envs, seed=seed)
+        env = build_eval_env(config, num_envs=num_envs, seed=seed,
+                             action=played_action(config, deterministic))
         try:
             actor, info = load_actor(run_dir, env)
             result = run_episodes(env, actor, episodes, deterministic=deterministic,
@@ -124,9 +131,19 @@ def evaluate_run(run_dir: str | Path, *, episodes: int, deterministic: bool = Fa
         finally:
             env.close()
         return write_evaluation(run_dir, config, env, result, info,
-                                settings={"episodes": episodes, "seed": seed,
-                                          "num_envs": num_envs, "deterministic": deterministic},
+                                settings=policy_settings(config, deterministic, {
+                                    "episodes": episodes, "seed": seed, "num_envs": num_envs}),
                                 overrides=overrides, name=name)
+
+
+def policy_settings(config: TrainConfig, deterministic: bool,
+                    settings: Mapping[str, Any]) -> dict[str, Any]:
+    """An evaluation's ``settings`` with how the policy acted: ``deterministic``, and for the
+    deployed policy its form (``deployed``: :func:`crllk.training.runs.deployed_form`)."""
+    played = {"deterministic": deterministic}
+    if deterministic:
+        played["deployed"] = deployed_form(config.action.name)
+    return {**settings, **played}
 
 
 def write_evaluation(run_dir: str | Path, config: TrainConfig, env: LaneKeepingEnv,
@@ -145,7 +162,7 @@ def write_evaluation(run_dir: str | Path, config: TrainConfig, env: LaneKeepingE
         settings["task_overrides"] = dict(overrides)
     thresholds = {c.name: config.algo.constraints[c.name].threshold
                   for c in env.config.constraints}
-    document = result_document(result, config.action.name, thresholds=thresholds,
+    document = result_document(result, env.action_type, thresholds=thresholds,
                                settings=settings, source=source,
                                objects=env.config.map.objects,
                                scales=community.Scales.of(env.config))
@@ -210,7 +227,8 @@ def record_run(run_dir: str | Path, *, episodes: int, seed: int | None = None,
     config = evaluation_config(run_dir, overrides)
     path = Path(run_dir) / EVAL_RECORDING
     with output_lock(path):
-        env = build_env(config, num_envs=1, seed=config.eval.seed if seed is None else seed)
+        env = build_env(config, num_envs=1, seed=config.eval.seed if seed is None else seed,
+                        action=played_action(config, deterministic))
         try:
             actor, info = load_actor(run_dir, env)
             report = record_episodes(env, actor, episodes, path, deterministic=deterministic,

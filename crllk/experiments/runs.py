@@ -8,7 +8,7 @@ import os
 import subprocess
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -22,6 +22,9 @@ from crllk.evaluation.runs import EVALUATION_ENVS, evaluate_run
 from crllk.protocol import TEST_EPISODES, TEST_EVALUATION, TEST_MODE_EVALUATION, TEST_SEED
 from crllk.training.runs import (
     EVAL_FILE,
+    EXPECTED_DUTY,
+    MODE,
+    deployed_form,
     has_policy,
     keep_policy,
     load_run_policy,
@@ -56,8 +59,9 @@ SWEEP_LANE_WEIGHTS = (0.3, 1.0, 3.0)
 SWEEP_COLLISION_WEIGHTS = (1.0, 4.0, 16.0, 64.0)
 """Fixed λ_coll of the sweep's PPO-D runs (per collision)."""
 MODE_EVALUATION = TEST_MODE_EVALUATION
-"""Each run's test evaluation of its deployed policy (``<run>/test-mode.json``): the policy's
-mode, the most probable action, as ``crllk.export`` writes it for the robot."""
+"""Each run's test evaluation of its deployed policy (``<run>/test-mode.json``), the one
+``crllk.export`` writes for the robot: a discrete run's expected duties, a continuous run's
+mode (:func:`crllk.training.runs.deployed_form`)."""
 
 
 @dataclass(frozen=True)
@@ -138,6 +142,26 @@ class Outcome:
     """How many evaluations (sampled and mode) this invocation made (the others were reused)."""
 
 
+def deployed_forms(documents: Sequence[Mapping[str, Any]]) -> list[str]:
+    """How the deployed policies of these evaluations acted
+    (:func:`crllk.training.runs.deployed_form`; ``mode`` for documents written before the
+    evaluations recorded it, when every deployed policy was its mode)."""
+    return sorted({d.get("evaluation", {}).get("deployed", MODE) for d in documents})
+
+
+def expected_duties_deployed(entries: Iterable[Mapping[str, Any]]) -> bool:
+    """Whether any of these aggregates of deployed policies (``"mode"`` entries of a table)
+    drove its expected duties: their tables then describe the deployed policy as
+    :data:`DEPLOYED_NOTE` does, and older tables keep calling it the mode."""
+    return any(EXPECTED_DUTY in entry.get("deployed", ()) for entry in entries)
+
+
+DEPLOYED_NOTE = ("the policy `crllk.export` writes for the robot: a discrete agent's expected "
+                 "wheel duties (its three duty pairs weighted by their probabilities), a "
+                 "continuous agent's mode")
+"""What a table's *deployed policy* is, once its discrete agents deploy expected duties."""
+
+
 # ----- running ------------------------------------------------------------------------------
 def trained_frames(run_dir: Path) -> int:
     """Frames of the run's last policy (its checkpoint, or the ``policy.pt`` that
@@ -152,18 +176,21 @@ def trained_frames(run_dir: Path) -> int:
 def evaluation_is_current(run_dir: Path, settings: Settings, name: str,
                           deterministic: bool = False) -> bool:
     """Whether ``<name>.json`` evaluated the last policy with these settings and
-    ``crllk.evaluate``'s simulations (of the sampled policy, or with ``deterministic`` of its
-    mode)."""
+    ``crllk.evaluate``'s simulations (of the sampled policy, or with ``deterministic`` of the
+    deployed one, in its present form: a discrete run's mode evaluated before its expected
+    duties were deployed is not current)."""
     path = run_dir / f"{name}.json"
     if not path.is_file():
         return False
     document = json.loads(path.read_text())
-    evaluation = document.get("evaluation", {})
-    return (document.get("source", {}).get("frames") == trained_frames(run_dir)
+    evaluation, source = document.get("evaluation", {}), document.get("source", {})
+    deployed = (not deterministic or evaluation.get("deployed", MODE)
+                == deployed_form(source.get("action", "")))
+    return (source.get("frames") == trained_frames(run_dir)
             and evaluation.get("episodes") == settings.episodes
             and evaluation.get("seed") == settings.eval_seed
             and evaluation.get("num_envs", EVALUATION_ENVS) == EVALUATION_ENVS
-            and evaluation.get("deterministic") is deterministic)
+            and evaluation.get("deterministic") is deterministic and deployed)
 
 
 def sweep_commands(specs: Sequence[RunSpec], settings: Settings) -> list[list[str]]:
@@ -275,7 +302,7 @@ def train_and_evaluate(specs: Sequence[RunSpec], settings: Settings,
     modes = [s for s in specs if has_policy(s.directory(root))
              and not _mode_is_current(s.directory(root), settings)]
     print(f"test evaluation of {len(to_evaluate)} of {len(specs)} runs, and of the deployed "
-          f"policy (mode) of {len(modes)}", flush=True)
+          f"policy of {len(modes)}", flush=True)
     evaluate_runs([(s.directory(root), {"name": TEST_EVALUATION}) for s in to_evaluate]
                   + [(s.directory(root), {"name": MODE_EVALUATION, "deterministic": True})
                      for s in modes], settings)

@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from crllk.evaluation.report import DIRECTIONS
-from crllk.experiments.runs import MAP_TASKS
+from crllk.experiments.runs import DEPLOYED_NOTE, MAP_TASKS, expected_duties_deployed
 from crllk.files import atomic_write_text
 from crllk.paths import task_file, task_names
 from crllk.protocol import TEST_SEED
@@ -160,7 +160,13 @@ def seeds_markdown(documents: Mapping[str, Mapping[str, Any]]) -> str:
         *seeds_table(documents), ""]
     with_mode = any("mode" in entry for document in documents.values()
                     for entry in document["agents"].values())
-    if with_mode:
+    expected = expected_duties_deployed(entry["mode"] for document in documents.values()
+                                        for entry in document["agents"].values()
+                                        if "mode" in entry)
+    if with_mode and expected:
+        lines += [f"## The deployed policy ({DEPLOYED_NOTE})", "",
+                  *seeds_table(documents, mode=True), ""]
+    elif with_mode:
         lines += ["## The deployed policy (the most probable action, what `crllk.export` "
                   "writes)", "", *seeds_table(documents, mode=True), ""]
     for document in documents.values():
@@ -184,7 +190,10 @@ def _directions_note(task: str) -> str:
 def direction_table(document: Mapping[str, Any], mode: bool = False) -> list[str]:
     """A row per agent and seed, a column per start direction, of one table document's
     runs (with ``mode``: of the deployed policies)."""
-    label = "deployed policy (mode)" if mode else "sampled policy"
+    expected = expected_duties_deployed(entry["mode"] for entry in document["agents"].values()
+                                        if "mode" in entry)
+    label = ("sampled policy" if not mode else "deployed policy" if expected
+             else "deployed policy (mode)")
     lines = [f"| {label}: agent, seed | " + " | ".join(DIRECTIONS) + " |",
              "| --- " * (len(DIRECTIONS) + 1) + "|"]
     for agent, entry in document["agents"].items():

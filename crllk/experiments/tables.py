@@ -12,10 +12,19 @@ from typing import Any
 
 from crllk.evaluation.report import PAPER_CONSTRAINTS, aggregate
 from crllk.evaluation.runs import evaluate_follower
-from crllk.experiments.runs import PAPER_J_R_PER_METRE, THRESHOLDS, Outcome, Settings
+from crllk.experiments.runs import (
+    DEPLOYED_NOTE,
+    PAPER_J_R_PER_METRE,
+    THRESHOLDS,
+    Outcome,
+    Settings,
+    deployed_forms,
+    expected_duties_deployed,
+)
 from crllk.experiments.seeds import write_seeds
 from crllk.files import atomic_write_text
 from crllk.protocol import TEST_SEED
+from crllk.training.runs import EXPECTED_DUTY
 
 
 def agent_results(outcome: Outcome, task: str, agents: Sequence[str],
@@ -30,7 +39,8 @@ def agent_results(outcome: Outcome, task: str, agents: Sequence[str],
         if docs:
             summary = aggregate(docs)
             if all(s in outcome.modes for s in specs):
-                summary["mode"] = aggregate([outcome.modes[s] for s in specs])
+                modes = [outcome.modes[s] for s in specs]
+                summary["mode"] = {**aggregate(modes), "deployed": deployed_forms(modes)}
             summary["train_seconds"] = [d["source"]["elapsed_s"] for d in docs]
             summary["frames"] = [d["source"]["frames"] for d in docs]
             summary["multipliers"] = [d["source"]["multipliers"] for d in docs]
@@ -78,7 +88,7 @@ def verdicts(results: dict[str, dict[str, Any]], constrained: Sequence[str],
                          for c in constraints) for k in range(len(entry["satisfied"]))]
             per_seed += "; at the 95 % upper bound: " + ", ".join(
                 "yes" if u else "no" for u in upper)
-        name = f"{agent}'s deployed policy (mode)" if mode else agent
+        name = f"{agent}'s {deployed_name(entry)}" if mode else agent
         if misses:
             lines.append(f"- {name} misses on average: {'; '.join(misses)} "
                          f"({held}: {per_seed}).")
@@ -86,6 +96,13 @@ def verdicts(results: dict[str, dict[str, Any]], constrained: Sequence[str],
             lines.append(f"- {name} satisfies {everything} on average "
                          f"({held}: {per_seed}).")
     return lines
+
+
+def deployed_name(entry: dict[str, Any]) -> str:
+    """A deployed policy's aggregate named by how it acted (:func:`deployed_forms`)."""
+    if EXPECTED_DUTY in entry.get("deployed", ()):
+        return "deployed policy (expected duties)"
+    return "deployed policy (mode)"
 
 
 def comparisons(results: dict[str, dict[str, Any]], pairs: Sequence[tuple[str, str]],
@@ -140,11 +157,14 @@ def table_markdown(document: dict[str, Any]) -> str:
             suffix = f" (paper, ≈ {PAPER_J_R_PER_METRE:g} per m)" if metric == "J_R" else " (paper)"
             rows.append(f"| {metric}{suffix} | " + " | ".join(paper_cells) + " | |")
     with_mode = any("mode" in results[a] for a in agents)
+    expected = expected_duties_deployed(results[a]["mode"] for a in agents
+                                        if "mode" in results[a])
+    deployed_row = "deployed policy" if expected else "deployed policy (mode)"
     if with_mode:
         for metric, digits in (*((c["metric"], 3) for c in _constraints(results)), ("J_R", 2)):
             cells = [_cell(results[a]["mode"][metric], digits) if "mode" in results[a] else "—"
                      for a in agents]
-            rows.append(f"| {metric}, deployed policy (mode) | " + " | ".join(cells) + " | |")
+            rows.append(f"| {metric}, {deployed_row} | " + " | ".join(cells) + " | |")
     minutes = [s / 60 for a in agents for s in results[a]["train_seconds"]]
     obs = settings["obs"]
     lines = [
@@ -164,6 +184,8 @@ def table_markdown(document: dict[str, Any]) -> str:
            if settings["eval_seed"] == TEST_SEED else
            "(a validation seed, not the test protocol's; never a training seed)")
         + ", the last checkpoint" + (
+            f"; the rows marked *deployed policy* play the same episodes with {DEPLOYED_NOTE}."
+            if with_mode and expected else
             "; the rows marked *deployed policy (mode)* play the same episodes with the most "
             "probable action, the policy `crllk.export` writes for the robot." if with_mode
             else "."),

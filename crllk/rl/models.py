@@ -24,11 +24,12 @@ import torch
 from tensordict.nn import TensorDictModule
 from torch import nn
 from torch.distributions import Categorical
+from torchrl.data import Categorical as CategoricalSpec
 from torchrl.data import TensorSpec
 from torchrl.modules import ProbabilisticActor, TanhNormal, ValueOperator
 
 from crllk.rl.model_config import ModelConfig
-from crllk.tasks.actions import GAUSSIAN_ACTIONS, POLICY_ACTIONS
+from crllk.tasks.actions import DISCRETE_DUTIES, GAUSSIAN_ACTIONS, POLICY_ACTIONS
 
 PIXEL_SCALE = 1.0 / 255.0  # uint8 camera value -> [0, 1]
 
@@ -202,7 +203,9 @@ def make_actor(observation: str, observation_shape: Sequence[int], action: str,
     """The policy: categorical over the three discrete actions, or a tanh-squashed Gaussian
     over (velocity, steering) in [-1, 1]². Writes ``action`` and ``action_log_prob``.
     ``feature_names`` (state observations) choose the fixed input scales. With
-    ``commands_dim`` the policy also reads ``"commands"``, its recent wheel duties."""
+    ``commands_dim`` the policy also reads ``"commands"``, its recent wheel duties. A
+    discrete policy built for an environment of other actions (its deployed policy plays
+    wheel duties, :mod:`crllk.rl.expected_duty`) keeps its own three actions."""
     encoder, width = make_encoder(observation, observation_shape, config, feature_names)
     in_keys = [observation, "commands"] if commands_dim else [observation]
 
@@ -213,6 +216,9 @@ def make_actor(observation: str, observation_shape: Sequence[int], action: str,
         return nn.Sequential(encoder, head)
 
     if action == "discrete":
+        if not isinstance(action_spec, CategoricalSpec):
+            action_spec = CategoricalSpec(len(DISCRETE_DUTIES), shape=action_spec.shape[:-1],
+                                          dtype=torch.int64, device=action_spec.device)
         num_actions = int(action_spec.space.n)
         module = TensorDictModule(body(num_actions), in_keys=in_keys, out_keys=["logits"])
         return ProbabilisticActor(module, in_keys=["logits"], spec=action_spec,

@@ -21,10 +21,12 @@ from crllk.tasks.constraints import Constraint
 
 
 def build_env(config: TrainConfig, *, num_envs: int, seed: int,
-              training: bool = False) -> BatchedLaneKeepingEnv:
+              training: bool = False, action: str | None = None) -> BatchedLaneKeepingEnv:
     """The run's environment; the ``training`` one starts ``encounters`` of its episodes in
     front of an obstacle, the others keep the task's own spawns and report the lane pose the
-    community's metrics need."""
+    community's metrics need. ``action``: the action type it takes (default the run's; a
+    discrete run's deployed policy plays in ``duty``, see
+    :func:`crllk.training.runs.played_action`)."""
     overrides = config.task_overrides()
     if training and config.encounters > 0:
         spawn = {**overrides.get("spawn", {}), "encounters": config.encounters}
@@ -34,7 +36,7 @@ def build_env(config: TrainConfig, *, num_envs: int, seed: int,
             spawn["encounter_curve_weight"] = config.encounter_curve_weight
         overrides = {**overrides, "spawn": spawn}
     return make_env(config.task_source(), num_envs=num_envs, observation=config.obs.name,
-                    action=config.action.name, seed=seed, overrides=overrides,
+                    action=action or config.action.name, seed=seed, overrides=overrides,
                     privileged_state=config.model.critic_input == "state",
                     teacher=training and (config.teacher.coeff > 0 or config.teacher.final > 0),
                     teacher_margin=config.teacher.margin,
@@ -68,29 +70,31 @@ def build_training_env(config: TrainConfig) -> TrainingEnv:
     return ParallelLaneKeepingEnv(worker_env, shares, num_threads=config.threads)
 
 
-def build_eval_env(config: TrainConfig, *, num_envs: int,
-                   seed: int) -> LaneKeepingEnv:
+def build_eval_env(config: TrainConfig, *, num_envs: int, seed: int,
+                   action: str | None = None) -> LaneKeepingEnv:
     """An evaluation's environment (:func:`build_env`), split among the run's ``workers``
     processes like its training simulations when they divide ``num_envs`` (and the run
     collects locally); simulation ``i`` spawns from the same seed either way, so the episodes
-    are the same."""
+    are the same. ``action``: as :func:`build_env`'s."""
     workers = config.workers
     if workers == 1 or config.collector != "local" or num_envs % workers:
-        return build_env(config, num_envs=num_envs, seed=seed)
+        return build_env(config, num_envs=num_envs, seed=seed, action=action)
     share = num_envs // workers
     shares = [{"config": config, "first": w * share, "count": share, "seed": seed,
-               "num_envs": num_envs, "training": False} for w in range(workers)]
+               "num_envs": num_envs, "training": False, "action": action}
+              for w in range(workers)]
     return ParallelLaneKeepingEnv(worker_env, shares)
 
 
 def worker_env(config: TrainConfig, first: int, count: int, seed: int | None = None,
-               num_envs: int | None = None, training: bool = True) -> BatchedLaneKeepingEnv:
+               num_envs: int | None = None, training: bool = True,
+               action: str | None = None) -> BatchedLaneKeepingEnv:
     """A worker's share of the training simulations (or, with ``seed`` and ``num_envs``, of an
-    evaluation's): ``count`` of them from simulation ``first``, each with the spawn seed it has
-    in the one-process env (runs in the worker)."""
+    evaluation's, taking ``action``): ``count`` of them from simulation ``first``, each with
+    the spawn seed it has in the one-process env (runs in the worker)."""
     seed = config.seed if seed is None else seed
     num_envs = config.num_envs if num_envs is None else num_envs
-    env = build_env(config, num_envs=count, seed=seed, training=training)
+    env = build_env(config, num_envs=count, seed=seed, training=training, action=action)
     env.set_spawn_seeds(sub_env_seeds(seed, num_envs)[first:first + count])
     return env
 

@@ -83,16 +83,39 @@ def keep_policy(run_dir: str | Path) -> Path | None:
     return save_checkpoint(kept, policy_state(load_checkpoint(checkpoint)))
 
 
+EXPECTED_DUTY = "expected_duty"
+"""How a discrete run's deployed policy acts (:mod:`crllk.rl.expected_duty`)."""
+MODE = "mode"
+"""How a Gaussian run's deployed policy acts: tanh of its mean, TorchRL's deterministic action."""
+
+
+def deployed_form(action: str) -> str:
+    """How the deterministic (deployed) policy of a run with ``action`` acts:
+    :data:`EXPECTED_DUTY` for discrete runs, :data:`MODE` for the others."""
+    return EXPECTED_DUTY if action == "discrete" else MODE
+
+
+def played_action(config: TrainConfig, deterministic: bool) -> str:
+    """The action type the run's policy plays in: a discrete run's deployed (``deterministic``)
+    policy drives its expected wheel duties (``duty``); otherwise the run's own."""
+    return "duty" if deterministic and config.action.name == "discrete" else config.action.name
+
+
 def load_actor(run_dir: str | Path, env: Any) -> tuple[torch.nn.Module, dict[str, Any]]:
     """The run's policy (:func:`load_run_policy`) built for ``env``, and its counters
-    (``iteration``, ``frames``, ``elapsed``) and multipliers."""
+    (``iteration``, ``frames``, ``elapsed``) and multipliers. A discrete run's policy for an
+    environment of ``duty`` actions (:func:`played_action`) is its deployed one: its expected
+    wheel duties (:func:`crllk.rl.expected_duty.expected_duty_policy`)."""
     from crllk.algos import build_learner
+    from crllk.rl.expected_duty import expected_duty_policy
 
     config = load_run_config(run_dir)
     state = load_run_policy(run_dir)
     actor = build_learner(config, env).actor
     actor.load_state_dict(state["actor"])
     actor.eval()
+    if config.action.name == "discrete" and env.action_type == "duty":
+        return expected_duty_policy(actor).eval(), policy_info(state)
     return actor, policy_info(state)
 
 
