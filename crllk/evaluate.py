@@ -83,7 +83,8 @@ class EvaluateConfig:
     """The gap (m) the teacher keeps beside the obstacles it passes (a run's ``teacher.margin``)."""
     episodes: int = setting(100, check=at_most(MAX_EPISODES))
     deterministic: bool = False
-    """The policy's mode instead of sampled actions."""
+    """The deployed policy instead of sampled actions: a discrete run's expected duties, a
+    continuous run's mode."""
     seed: int | None = setting(None, check=spawn_seed)
     """Spawn and sampling seed (default: the run's ``eval.seed``, a validation seed; the test
     seed is refused, :mod:`crllk.protocol`)."""

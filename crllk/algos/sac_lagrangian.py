@@ -40,6 +40,7 @@ from crllk.rl.models import make_actor, make_encoder
 from crllk.rl.plain import tensordict_from_plain, tensordict_to_plain
 from crllk.rl.sampling import ActionNoise
 from crllk.settings import non_negative, open_unit_interval, parse, positive, setting, unit_interval
+from crllk.tasks.actions import DISCRETE_DUTIES
 from crllk.tasks.constraints import cost_key
 from crllk.tasks.lane_keeping import state_feature_names
 
@@ -188,11 +189,11 @@ class SACLagrangian:
         encoder, width = make_encoder("state", shape, model, names)
         costs = [c.name for c in env.constraints]
         if config.action.name == "discrete":
-            actions = int(env.action_spec.space.n)
+            actions = len(DISCRETE_DUTIES)  # the env may take duties (the deployed policy)
             qvalue = TensorDictModule(QNetwork(encoder, width, model.hidden, actions),
                                       in_keys=["state"], out_keys=["action_value"])
             loss = DiscreteSACLoss(
-                actor, qvalue, action_space=env.action_spec, num_actions=actions,
+                actor, qvalue, action_space="categorical", num_actions=actions,
                 loss_function="l2", alpha_init=settings.alpha_init,
                 target_entropy=settings.target_entropy_fraction * math.log(actions))
         else:

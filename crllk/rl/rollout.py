@@ -102,7 +102,8 @@ def run_episodes(env: LaneKeepingEnv, policy: Callable[[TensorDictBase], TensorD
         env: the simulations, in this process or in worker processes (batch size ``[N]``).
         policy: writes ``"action"`` into the tensordict it is given.
         episodes: how many episodes to finish in total.
-        deterministic: take the policy's mode instead of sampling.
+        deterministic: take the policy's mode instead of sampling (a discrete run's
+            deployed policy in a duty env never samples: its expected duties).
         sample_seed: when sampling, seeds torch's generator for the episodes and restores it
             afterwards, so the result depends only on the env's seed, ``N`` and this seed.
     """

@@ -304,7 +304,9 @@ def open_live_view(config: TrainConfig, run_dir: Path, constraints: Sequence[Con
 
 def record_iteration(config: TrainConfig, env: BatchedLaneKeepingEnv, learner: Learner,
                      multipliers: dict[str, Multiplier], iteration: int) -> Path | None:
-    """Records one deterministic evaluation episode to
+    """Records one evaluation episode of the policy's most probable action (in the training's
+    own action type; a discrete run's deployed policy, its expected duties, is recorded by
+    ``python -m crllk.evaluate record=true``) to
     ``<run_dir>/recordings/iteration_<iteration>.rrd`` (and the viewer of ``viewer``, if any)
     and returns its path. Files of one run share a recording id, so opened together they line
     up on the ``iteration`` timeline. A recording that fails is a warning (and None): training
