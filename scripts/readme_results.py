@@ -96,7 +96,10 @@ def _agent_sentence(agent: str, entry: dict) -> str:
     runs = len(entry["runs"])
     held = f"{sum(entry['satisfied'])} of {runs} seeds hold every constraint"
     if "mode" in entry:
-        held += f" ({sum(entry['mode']['satisfied'])} of {runs} in the deployed mode)"
+        deployed = ("deployed, as expected duties"
+                    if "expected_duty" in entry["mode"].get("deployed", ()) else
+                    "in the deployed mode")
+        held += f" ({sum(entry['mode']['satisfied'])} of {runs} {deployed})"
     metrics = ", ".join(f"{c['metric']} {_span(entry[c['metric']]['values'], 3)}"
                         for c in entry["constraints"])
     kind = "fixed" if agent.startswith("PPO") else "learned"

@@ -68,7 +68,8 @@ def test_map_tables_and_figure1_are_written(tiny_experiments):
         assert (results / name).read_bytes()[:4] == b"\x89PNG"
     assert len(figure["thresholds"]["0.08"]["mode_evaluations"]) == 1
     words = (results / "figure1.md").read_text()
-    assert words.count("\n| 0.") == 4 and "deployed mode" in words
+    assert figure["thresholds"]["0.08"]["deployed"] == ["expected_duty"]
+    assert words.count("\n| 0.") == 4 and "deployed policy (expected duties), per seed" in words
     assert (runs / "small_loop" / "CRLLK-D-a0.08-seed0" / "eval.json").exists()
     config = (runs / "small_loop" / "CRLLK-D-a0.08-seed0" / "config.yaml").read_text()
     assert "threshold: 0.08" in config
@@ -120,6 +121,25 @@ def test_figure1_words_compare_with_the_farthest_fixed_pair_holding_on_every_see
     assert ("α1 = 0.1: the sampled policy holds both constraints on every seed (J_clane 0.090 "
             "dm, J_R 2.55 m), -0.05 m against the best fixed pair that holds (1/4); the "
             "deployed mode misses (J_clane 0.110 dm).") in words
+    data["thresholds"]["0.1"]["deployed"] = ["expected_duty"]
+    assert "the deployed policy (expected duties) misses" in figure1_markdown(data, None)
+
+
+def test_deployed_label_names_what_the_evaluations_played():
+    """Aggregates written before evaluations recorded how the deployed policy acted are the
+    mode; all expected duties, or a mix of discrete and continuous agents, say so."""
+    from crllk.experiments.runs import deployed_label, mode_aggregate
+
+    old, duties, mode = {"J_coll": {}}, {"deployed": ["expected_duty"]}, {"deployed": ["mode"]}
+    assert deployed_label([old, None]) == deployed_label([mode]) == "deployed policy (mode)"
+    assert deployed_label([duties, None]) == "deployed policy (expected duties)"
+    assert deployed_label([duties, mode]) == "deployed policy"
+    summary = {"J_R": 2.0, "J_clane": 0.1, "J_coll": 0.0, "episode_length": 512,
+               "satisfied": True}
+    documents = [{"source": {"run_dir": "a"}, "summary": summary,
+                  "evaluation": {"deployed": "expected_duty"}},
+                 {"source": {"run_dir": "b"}, "summary": summary, "evaluation": {}}]
+    assert mode_aggregate(documents)["deployed"] == ["expected_duty", "mode"]
 
 
 def test_every_seed_is_written_beside_the_tables(tiny_experiments):

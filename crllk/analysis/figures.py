@@ -26,6 +26,7 @@ from crllk.protocol import TEST_EVALUATION, TEST_MODE_EVALUATION
 from crllk.tasks.actions import DISCRETE_NAMES
 from crllk.training.build import build_env
 from crllk.training.runs import (
+    MODE,
     load_actor,
     load_run_config,
     played_action,
@@ -142,6 +143,8 @@ def figure1_data(by_threshold: Mapping[float, Sequence[Path]],
             curves[column] = {"frames": frames.tolist(), "mean": mean.tolist(),
                               "min": low.tolist(), "max": high.tolist()}
         episode = read_eval_json(run_dirs[0], TEST_EVALUATION)["episodes"][0]
+        modes = [read_eval_json(d, TEST_MODE_EVALUATION) for d in run_dirs
+                 if (d / f"{TEST_MODE_EVALUATION}.json").is_file()]
         data["thresholds"][f"{threshold:g}"] = {
             "runs": [str(d) for d in run_dirs], "curves": curves,
             "test_episode": {"run_dir": str(run_dirs[0]), "actions": episode["actions"],
@@ -149,9 +152,8 @@ def figure1_data(by_threshold: Mapping[float, Sequence[Path]],
                              "J_clane": episode_cost(episode, "lane"),
                              "collisions": episode_cost(episode, "collision")},
             "evaluations": [read_eval_json(d, TEST_EVALUATION)["summary"] for d in run_dirs],
-            "mode_evaluations": [read_eval_json(d, TEST_MODE_EVALUATION)["summary"]
-                                 for d in run_dirs
-                                 if (d / f"{TEST_MODE_EVALUATION}.json").is_file()],
+            "mode_evaluations": [m["summary"] for m in modes],
+            "deployed": sorted({m["evaluation"].get("deployed", MODE) for m in modes}),
             "final_lambda_lane": [float(read_metrics(d)["lambda_lane"][-1]) for d in run_dirs]}
     return data
 

@@ -20,7 +20,15 @@ from pathlib import Path
 from typing import Any
 
 from crllk.evaluation.report import aggregate
-from crllk.experiments.runs import THRESHOLDS, Outcome, RunSpec, Settings, train_and_evaluate
+from crllk.experiments.runs import (
+    THRESHOLDS,
+    Outcome,
+    RunSpec,
+    Settings,
+    deployed_label,
+    mode_aggregate,
+    train_and_evaluate,
+)
 from crllk.experiments.seeds import PER_SEED_METRICS, SEED_OF_RUN, direction_cells, seed_cells
 from crllk.experiments.tables import invocation, invocation_note, settings_dict, write_documents
 
@@ -90,7 +98,7 @@ class Ablation:
                     continue
                 entry = aggregate([outcome.documents[s] for s in specs])
                 if all(s in outcome.modes for s in specs):
-                    entry["mode"] = aggregate([outcome.modes[s] for s in specs])
+                    entry["mode"] = mode_aggregate([outcome.modes[s] for s in specs])
                 entries[name] = entry
             maps[task] = entries
         described: dict[str, Any] = {}
@@ -126,14 +134,18 @@ def ablation_markdown(document: Mapping[str, Any], label: str = "variant") -> st
             + f"; {', '.join(v['tasks']) or 'no map'})"
             for name, v in document["variants"].items()) + ".")
     lines.append("")
+    modes = [entry.get("mode") for entries in document["maps"].values()
+             for entry in entries.values()]
     if "baseline" in document:
         lines += ["## What each aid buys", "",
                   f"{document['baseline']} → the variant without the aid, per training seed: "
-                  "the sampled policy, then the deployed one (mode), and in how many seeds both "
+                  f"the sampled policy, then the {deployed_label(modes)}, and in how many seeds "
+                  "both "
                   "constraints hold, on the point estimate and at the 95 % upper bound.", "",
                   *buys_lines(document), ""]
     for task, entries in document["maps"].items():
-        lines += [f"## {task}", "", f"| {label} | seed | sampled policy | deployed policy (mode) |",
+        deployed = deployed_label(modes)
+        lines += [f"## {task}", "", f"| {label} | seed | sampled policy | {deployed} |",
                   "| --- | --- | --- | --- |"]
         for name, entry in entries.items():
             sampled = seed_cells(entry, thresholds)
@@ -165,7 +177,8 @@ def buys_lines(document: Mapping[str, Any]) -> list[str]:
                 continue
             aid = document["variants"].get(name, {}).get("aid") or name
             pairs = (("Sampled policy", default, entry),
-                     ("Deployed policy (mode)", default.get("mode"), entry.get("mode")))
+                     (deployed_label([default.get("mode"), entry.get("mode")]).capitalize(),
+                      default.get("mode"), entry.get("mode")))
             parts = [f"{policy}: {_compare(a, b, thresholds)}" for policy, a, b in pairs
                      if a is not None and b is not None]
             lines.append(f"- **{aid}** on {task} ({baseline} → {name}). " + ". ".join(parts)

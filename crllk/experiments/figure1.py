@@ -11,6 +11,8 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
+from crllk.training.runs import EXPECTED_DUTY
+
 COLLISION_THRESHOLD = 0.02
 """α2 (collisions per episode) of every Figure 1 run; the sweep document states its own."""
 
@@ -49,7 +51,7 @@ def figure1_markdown(data: Mapping[str, Any], sweep: Mapping[str, Any] | None) -
         "constraints at that α1 on every seed.", "",
         f"- Command: `{settings['command']}`; budget {settings['frames']:,} frames per run.",
         f"- Machine: {settings['machine']}.", "",
-        "| α1 (dm) | sampled policy, per seed | deployed mode, per seed | final λ_lane "
+        f"| α1 (dm) | sampled policy, per seed | {_deployed(data)}, per seed | final λ_lane "
         "| best fixed pair (λ_lane/λ_coll): J_clane / J_R |",
         "| --- | --- | --- | --- | --- |"]
     for threshold, entry in data["thresholds"].items():
@@ -87,10 +89,18 @@ def _summary(data: Mapping[str, Any], fixed: list[Mapping[str, Any]],
         modes = entry.get("mode_evaluations", [])
         if modes:
             mode_holds = all(s["J_clane"] <= alpha and s["J_coll"] <= collision for s in modes)
-            text += (f"; the deployed mode {'holds' if mode_holds else 'misses'} "
+            text += (f"; the {_deployed(data)} {'holds' if mode_holds else 'misses'} "
                      f"(J_clane {_mean([s['J_clane'] for s in modes]):.3f} dm)")
         sentences.append(f"- {text}.")
     return sentences
+
+
+def _deployed(data: Mapping[str, Any]) -> str:
+    """The deployed policies' name: ``deployed mode``, or ``deployed policy (expected
+    duties)`` once their evaluations played those."""
+    if any(EXPECTED_DUTY in entry.get("deployed", ()) for entry in data["thresholds"].values()):
+        return "deployed policy (expected duties)"
+    return "deployed mode"
 
 
 __all__ = ["COLLISION_THRESHOLD", "best_fixed_pair", "figure1_markdown"]

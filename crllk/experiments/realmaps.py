@@ -33,7 +33,15 @@ from typing import Any
 
 from crllk.config import validate
 from crllk.evaluation.report import aggregate
-from crllk.experiments.runs import THRESHOLDS, Outcome, RunSpec, Settings, train_and_evaluate
+from crllk.experiments.runs import (
+    THRESHOLDS,
+    Outcome,
+    RunSpec,
+    Settings,
+    deployed_forms,
+    deployed_label,
+    train_and_evaluate,
+)
 from crllk.experiments.seeds import SEED_OF_RUN, direction_cells, seed_cells
 from crllk.experiments.tables import invocation, invocation_note, settings_dict, write_documents
 from crllk.paths import SOURCE_ROOT
@@ -110,7 +118,8 @@ def realmaps_document(outcome: Outcome, settings: Settings) -> dict[str, Any]:
         entry = {"file": specs[0].task_file, "about": REALMAPS.get(name, ""),
                  **_entry([outcome.documents[s] for s in specs])}
         if all(s in outcome.modes for s in specs):
-            entry["mode"] = _entry([outcome.modes[s] for s in specs])
+            modes = [outcome.modes[s] for s in specs]
+            entry["mode"] = {**_entry(modes), "deployed": deployed_forms(modes)}
         maps[name] = entry
     return {"title": f"Maps nobody tuned on: {REALMAPS_AGENT} ({settings.obs})",
             "thresholds": THRESHOLDS, "settings": settings_dict(settings),
@@ -184,12 +193,13 @@ def realmaps_markdown(document: Mapping[str, Any]) -> str:
     for name, entry in document["maps"].items():
         sampled = seed_cells(entry, thresholds)
         mode = seed_cells(entry["mode"], thresholds) if "mode" in entry else {}
+        deployed = deployed_label([entry.get("mode")])
         lines += [f"## {name} (`{entry['file']}`)", "", f"{entry['about']}.", "",
-                  "| seed | sampled policy | deployed policy (mode) |", "| --- | --- | --- |"]
+                  f"| seed | sampled policy | {deployed} |", "| --- | --- | --- |"]
         lines += [f"| {seed} | {sampled[seed]} | {mode.get(seed, '—')} |"
                   for seed in sorted(sampled)]
         policies = [("sampled policy", entry)] + (
-            [("deployed policy (mode)", entry["mode"])] if mode else [])
+            [(deployed, entry["mode"])] if mode else [])
         for label, source in policies:
             if "by_direction" in source:
                 cells = direction_cells(source, thresholds)

@@ -17,7 +17,7 @@ import torch
 from joblib import Parallel, delayed
 
 from crllk.config import algo_thresholds
-from crllk.evaluation.report import PAPER_CONSTRAINTS, format_summary
+from crllk.evaluation.report import PAPER_CONSTRAINTS, aggregate, format_summary
 from crllk.evaluation.runs import EVALUATION_ENVS, evaluate_run
 from crllk.protocol import TEST_EPISODES, TEST_EVALUATION, TEST_MODE_EVALUATION, TEST_SEED
 from crllk.training.runs import (
@@ -154,6 +154,23 @@ def expected_duties_deployed(entries: Iterable[Mapping[str, Any]]) -> bool:
     drove its expected duties: their tables then describe the deployed policy as
     :data:`DEPLOYED_NOTE` does, and older tables keep calling it the mode."""
     return any(EXPECTED_DUTY in entry.get("deployed", ()) for entry in entries)
+
+
+def mode_aggregate(documents: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
+    """:func:`~crllk.evaluation.report.aggregate` of deployed-policy evaluations, with how they
+    acted (``"deployed"``: :func:`deployed_forms`)."""
+    return {**aggregate(documents), "deployed": deployed_forms(documents)}
+
+
+def deployed_label(entries: Iterable[Mapping[str, Any] | None]) -> str:
+    """How a table names its deployed policies (``"mode"`` aggregates, None where missing):
+    by what they played; tables of argmax evaluations keep calling them the mode."""
+    found = [e for e in entries if e is not None]
+    if not expected_duties_deployed(found):
+        return "deployed policy (mode)"
+    if all(e.get("deployed") == [EXPECTED_DUTY] for e in found):
+        return "deployed policy (expected duties)"
+    return "deployed policy"
 
 
 DEPLOYED_NOTE = ("the policy `crllk.export` writes for the robot: a discrete agent's expected "

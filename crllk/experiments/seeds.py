@@ -168,7 +168,7 @@ def seeds_markdown(documents: Mapping[str, Mapping[str, Any]]) -> str:
                   *seeds_table(documents, mode=True), ""]
     elif with_mode:
         lines += ["## The deployed policy (the most probable action, what `crllk.export` "
-                  "writes)", "", *seeds_table(documents, mode=True), ""]
+                  "wrote when these were evaluated)", "", *seeds_table(documents, mode=True), ""]
     for document in documents.values():
         if any("by_direction" in entry for entry in document["agents"].values()):
             lines += [f"## By start direction: {document['task']}", "",

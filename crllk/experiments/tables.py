@@ -18,13 +18,13 @@ from crllk.experiments.runs import (
     THRESHOLDS,
     Outcome,
     Settings,
-    deployed_forms,
+    deployed_label,
     expected_duties_deployed,
+    mode_aggregate,
 )
 from crllk.experiments.seeds import write_seeds
 from crllk.files import atomic_write_text
 from crllk.protocol import TEST_SEED
-from crllk.training.runs import EXPECTED_DUTY
 
 
 def agent_results(outcome: Outcome, task: str, agents: Sequence[str],
@@ -39,8 +39,7 @@ def agent_results(outcome: Outcome, task: str, agents: Sequence[str],
         if docs:
             summary = aggregate(docs)
             if all(s in outcome.modes for s in specs):
-                modes = [outcome.modes[s] for s in specs]
-                summary["mode"] = {**aggregate(modes), "deployed": deployed_forms(modes)}
+                summary["mode"] = mode_aggregate([outcome.modes[s] for s in specs])
             summary["train_seconds"] = [d["source"]["elapsed_s"] for d in docs]
             summary["frames"] = [d["source"]["frames"] for d in docs]
             summary["multipliers"] = [d["source"]["multipliers"] for d in docs]
@@ -88,7 +87,7 @@ def verdicts(results: dict[str, dict[str, Any]], constrained: Sequence[str],
                          for c in constraints) for k in range(len(entry["satisfied"]))]
             per_seed += "; at the 95 % upper bound: " + ", ".join(
                 "yes" if u else "no" for u in upper)
-        name = f"{agent}'s {deployed_name(entry)}" if mode else agent
+        name = f"{agent}'s {deployed_label([entry])}" if mode else agent
         if misses:
             lines.append(f"- {name} misses on average: {'; '.join(misses)} "
                          f"({held}: {per_seed}).")
@@ -96,13 +95,6 @@ def verdicts(results: dict[str, dict[str, Any]], constrained: Sequence[str],
             lines.append(f"- {name} satisfies {everything} on average "
                          f"({held}: {per_seed}).")
     return lines
-
-
-def deployed_name(entry: dict[str, Any]) -> str:
-    """A deployed policy's aggregate named by how it acted (:func:`deployed_forms`)."""
-    if EXPECTED_DUTY in entry.get("deployed", ()):
-        return "deployed policy (expected duties)"
-    return "deployed policy (mode)"
 
 
 def comparisons(results: dict[str, dict[str, Any]], pairs: Sequence[tuple[str, str]],
@@ -187,7 +179,8 @@ def table_markdown(document: dict[str, Any]) -> str:
             f"; the rows marked *deployed policy* play the same episodes with {DEPLOYED_NOTE}."
             if with_mode and expected else
             "; the rows marked *deployed policy (mode)* play the same episodes with the most "
-            "probable action, the policy `crllk.export` writes for the robot." if with_mode
+            "probable action, the policy `crllk.export` wrote for the robot when these were "
+            "evaluated." if with_mode
             else "."),
         f"- Command: `{settings['command']}` ({invocation_note(document)}).",
         f"- Machine: {settings['machine']}.", "",

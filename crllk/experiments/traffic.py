@@ -22,7 +22,15 @@ from typing import Any
 from crllk.evaluation.community import FORMATS, METRICS
 from crllk.evaluation.report import aggregate
 from crllk.evaluation.runs import evaluate_follower
-from crllk.experiments.runs import Outcome, RunSpec, Settings, agent_seeds, train_and_evaluate
+from crllk.experiments.runs import (
+    EXPECTED_DUTY,
+    Outcome,
+    RunSpec,
+    Settings,
+    agent_seeds,
+    deployed_forms,
+    train_and_evaluate,
+)
 from crllk.experiments.seeds import SEED_OF_RUN
 from crllk.experiments.tables import (
     invocation,
@@ -110,7 +118,8 @@ def traffic_document(outcome: Outcome, settings: Settings,
             specs = [s for s in outcome.documents if s.task == task and agent_label(s) == agent]
             entry = agent_entry([outcome.documents[s] for s in specs])
             if all(s in outcome.modes for s in specs):
-                entry["mode"] = agent_entry([outcome.modes[s] for s in specs])
+                modes = [outcome.modes[s] for s in specs]
+                entry["mode"] = {**agent_entry(modes), "deployed": deployed_forms(modes)}
             agents[agent] = entry
         first = next(s for s in outcome.documents if s.task == task)
         tasks[task] = {"about": TRAFFIC_TASKS.get(task, ""),
@@ -199,8 +208,8 @@ def traffic_markdown(document: Mapping[str, Any]) -> str:
         lines += [f"## {task}", "", f"{block['about']}. Constraints: {bounds}.", "",
                   "| " + " | ".join(header) + " |", "|" + " --- |" * len(header)]
         for agent, entry in agents.items():
-            policies = [("sampled", entry)] + ([("mode", entry["mode"])] if "mode" in entry
-                                               else [])
+            policies = [("sampled", entry)] + (
+                [(_deployed_short(entry["mode"]), entry["mode"])] if "mode" in entry else [])
             for label, source in policies:
                 for cells in run_cells(source, thresholds):
                     values = [cells["seed"], *(cells[c["metric"]] for c in constraints),
@@ -219,3 +228,9 @@ def traffic_markdown(document: Mapping[str, Any]) -> str:
 __all__ = ["STOPPABLE", "TEACHER_ACTIONS", "TRAFFIC_AGENTS", "TRAFFIC_TASKS", "agent_entry",
            "agent_label", "run_cells",
            "teacher_entry", "traffic", "traffic_document", "traffic_markdown", "traffic_specs"]
+
+
+def _deployed_short(entry: Mapping[str, Any]) -> str:
+    """The policy column's name for a deployed policy: ``mode``, or ``expected duties`` where
+    its evaluations played those."""
+    return "expected duties" if EXPECTED_DUTY in entry.get("deployed", ()) else "mode"
