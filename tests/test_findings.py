@@ -608,3 +608,47 @@ def test_the_closer_teacher_and_crllk_c_curve_weight_rows_are_their_evaluations(
     assert (f"seed 0's sampled policy hit it {weighted[0]} times with the weight, against "
             f"{hits[0][curve_duckie]} without (seed 1: {weighted[1]} against "
             f"{hits[1][curve_duckie]})") in text
+
+
+DEPLOYED_RUNS = (("default, seed 0", "CRLLK-D-a0.5-seed0"),
+                 ("default, seed 1", "CRLLK-D-a0.5-seed1"),
+                 *((f"`encounter_curve_weight=4`, seed {s}", f"CRLLK-D-curve4-a0.5-seed{s}")
+                   for s in (0, 1, 2)))
+"""The rows of the deployed-policy trial: label and run directory."""
+
+
+def test_the_deployed_policy_rows_are_their_validation_evaluations():
+    """The expected-duty trial: each run's ``val400`` (sampled), ``val400-mode`` (the most
+    probable action) and ``val400-deployed`` (the expected duties, recorded so), all 400
+    validation episodes; the prose's counts and ranges."""
+    root = REPO / "results/runs/pixels/obstacle_loop"
+    text = " ".join(FINDINGS.split())
+    rows = []
+    for label, run in DEPLOYED_RUNS:
+        sampled, mode = _val400_pair(root / run)
+        deployed = json.loads((root / run / "val400-deployed.json").read_text())
+        assert deployed["evaluation"] == {"episodes": 400, "seed": 1_000_000, "num_envs": 10,
+                                          "deterministic": True, "deployed": "expected_duty"}
+        assert "deployed" not in mode["evaluation"]  # the argmax, evaluated before
+        assert (f"| {label} | {_val400_cell(sampled)} | {_val400_cell(mode)} | "
+                f"{_val400_cell(deployed)} |") in FINDINGS
+        rows.append((sampled, mode, deployed))
+    endings = [sum(_endings(r[k]) for r in rows) for k in range(3)]
+    assert (f"ended none of their 2,000 episodes on an obstacle or off the road, against "
+            f"{endings[0]} for the sampled policies and {endings[1]} for the most probable "
+            "actions") in text and endings[2] == 0
+
+    def span(values: list[float], digits: int) -> str:
+        return f"{min(values):.{digits}f}–{max(values):.{digits}f}"
+
+    reverse = [[r[k]["breakdown"]["by_direction"]["reverse"]["J_clane"] for r in rows]
+               for k in range(3)]
+    blocked = [r[2]["breakdown"]["by_direction"]["intended"]["J_clane"] for r in rows]
+    lane = [r[2]["summary"]["J_clane"] for r in rows]
+    travel = [[r[k]["summary"]["J_R"] for r in rows] for k in (0, 2)]
+    assert (f"J_clane {span(lane, 3)} dm over all episodes, {span(reverse[2], 3)} dm in the "
+            f"reverse direction, where the most probable action deviated "
+            f"{span(reverse[1], 3)} dm") in text
+    assert f"(J_R {span(travel[1], 2)} m, against {span(travel[0], 2)} m sampled)" in text
+    assert f"the expected duties still deviate {span(blocked, 3)} dm, over α1" in text
+    assert min(travel[1]) > min(travel[0]) and max(lane) <= 0.5
