@@ -367,3 +367,23 @@ def test_how_the_pedestrian_seed_leaves_the_road_is_its_endings():
     assert min(final) > 0  # the right side
     assert f"between about −{-round(low)}° and +{round(high)}°" in text
     assert f"its turn changing side {min(swings)} to {max(swings)} times" in text
+
+
+def test_the_parity_table_is_the_committed_parity_output():
+    """Sim-to-real's parity table, row by row, is ``results/pixels/parity.txt`` (the runs in
+    the table's order, the share of frames per map in its column order)."""
+    lines = (REPO / "results/pixels/parity.txt").read_text().splitlines()
+    runs: list[list[str]] = []
+    for line in lines:
+        if line.startswith("== "):
+            runs.append([])
+        elif runs and ": the same command on " in line:
+            runs[-1].append(re.search(r"\(([\d.]+) %\)", line).group(1))
+    rows = [line for line in page("sim-to-real.md").splitlines()
+            if line.startswith(("| `small_loop`, randomised", "| `zigzag`, "))]
+    assert len(rows) == len(runs) == 7
+    for row, shares in zip(rows, runs, strict=True):
+        assert re.findall(r"([\d.]+) %", row) == shares, row
+    text = prose("sim-to-real.md")
+    default = [float(v) for shares in runs[2:] for v in shares]
+    assert f"on {min(default):.1f}–{max(default):.1f} % of frames" in text

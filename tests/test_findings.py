@@ -9,6 +9,7 @@ import pytest
 from docs_pages import prose
 
 from crllk.evaluation.intervals import wilson_interval
+from crllk.protocol import TEST_SEED
 
 REPO = Path(__file__).resolve().parents[1]
 FINDINGS = (REPO / "docs/findings.md").read_text()
@@ -257,11 +258,34 @@ def test_the_obstacle_loop_figures_are_the_test_evaluations():
         assert quoted in text
     blocked = ", ".join(f"{d['breakdown']['by_direction']['intended']['J_coll']:.3f}"
                         for d in deployed[:2])
-    assert (f"in the blocked direction alone (J_coll {blocked} and "
-            f"{deployed[2]['breakdown']['by_direction']['intended']['J_coll']:.3f})") in camera
+    assert (f"in the blocked direction alone on the point estimate (J_coll {blocked} and "
+            f"{deployed[2]['breakdown']['by_direction']['intended']['J_coll']:.3f};") in camera
     c_mode = [_test_document("obstacle_loop", "CRLLK-C", s, "test-mode")["summary"]["J_coll"]
               for s in (0, 1, 2)]
     assert [k for k, j in enumerate(c_mode) if j > 0.02] == [1, 2]
+    bounds = []
+    for d in deployed:
+        blocked_episodes = [e for e in d["episodes"] if e["direction"] == "intended"]
+        hit = sum(e["cost_collision"] > 0 for e in blocked_episodes)
+        bounds.append(wilson_interval(hit, len(blocked_episodes))[1])
+    assert (f"the upper bounds there are {min(bounds):.3f}–{max(bounds):.3f}, "
+            f"{len(blocked_episodes)} episodes per run") in camera
+    replaced = REPO / "results/runs/pixels/replaced"
+    first = [json.loads((replaced / "obstacle_loop/CRLLK-D-a0.5-seed2" / f"{n}.json")
+                        .read_text()) for n in ("test", "test-mode")]
+    assert first[0]["evaluation"]["seed"] == first[1]["evaluation"]["seed"] == TEST_SEED
+    assert "deployed" not in first[1]["evaluation"]  # the argmax
+    assert (f"The first `obstacle_loop` seed 2 gave J_coll {first[0]['summary']['J_coll']:.3f} "
+            f"sampled and {first[1]['summary']['J_coll']:.3f} from its most probable action, "
+            f"the new one {crllk[2]:.3f} and {deployed[2]['summary']['J_coll']:.3f}") in camera
+    assert f"seed 2 was trained again this round, its policy file lost (the replaced run gave " \
+        f"{first[0]['summary']['J_coll']:.3f})" in readme
+    for task in ("zigzag", "obstacle_loop"):
+        old_config = (replaced / task / "CRLLK-D-a0.5-seed2" / "config.yaml").read_text()
+        new_config = (REPO / "results/runs/pixels" / task / "CRLLK-D-a0.5-seed2" /
+                      "config.yaml").read_text()
+        for line in ("seed: 2", "total_frames: 500000", "  margin: 0.07", "encounters: 0.5"):
+            assert line in old_config and line in new_config
     teacher = json.loads((REPO / "results/scripted/teacher-obstacle_loop-margin0.07.json")
                          .read_text())["teacher"]
     assert teacher["summary"]["J_coll"] == 0
@@ -652,3 +676,13 @@ def test_the_deployed_policy_rows_are_their_validation_evaluations():
     assert f"(J_R {span(travel[1], 2)} m, against {span(travel[0], 2)} m sampled)" in text
     assert f"the expected duties still deviate {span(blocked, 3)} dm, over α1" in text
     assert min(travel[1]) > min(travel[0]) and max(lane) <= 0.5
+    for sampled, mode, deployed in rows:
+        for key in ("J_clane",):
+            assert deployed["summary"][key] < min(sampled["summary"][key], mode["summary"][key])
+        directions = [r["breakdown"]["by_direction"] for r in (sampled, mode, deployed)]
+        assert directions[2]["reverse"]["J_clane"] < min(d["reverse"]["J_clane"]
+                                                          for d in directions[:2])
+    least_blocked = sum(r[2]["breakdown"]["by_direction"]["intended"]["J_clane"]
+                        < min(r[k]["breakdown"]["by_direction"]["intended"]["J_clane"]
+                              for k in (0, 1)) for r in rows)
+    assert least_blocked == 4 and "(in the blocked direction on four of five)" in text
