@@ -124,6 +124,23 @@ def test_a_discrete_run_deploys_its_expected_duties(tiny_run):
     assert "actions" not in mode["episodes"][0]
 
 
+def test_the_analyses_play_the_deployed_expected_duties(tiny_run):
+    """The trajectory figure and the endings analysis play a discrete run's deployed policy in
+    a duty env: every step's action is a duty pair within the three pairs' range."""
+    from crllk.analysis.endings import play_endings
+    from crllk.analysis.figures import policy_trajectory
+    from crllk.tasks.actions import DISCRETE_DUTIES
+
+    trajectory = policy_trajectory(tiny_run, seed=3, deterministic=True)
+    actions = np.array(trajectory["actions"])
+    assert actions.shape[1] == 2
+    assert DISCRETE_DUTIES.min() - 1e-6 <= actions.min() <= actions.max() <= \
+        DISCRETE_DUTIES.max() + 1e-6
+    assert len(np.unique(actions.round(6), axis=0)) > 3  # not three pairs: their mixtures
+    endings = play_endings(tiny_run, 2, 0.5, deterministic=True)
+    assert endings["deterministic"] is True and endings["summary"]["episodes"] == 2
+
+
 def test_aggregate_is_mean_and_population_std_across_runs():
     docs = [{"source": {"run_dir": name}, "summary": {"J_R": r, "J_clane": c, "J_coll": k,
                                                       "episode_length": 512,
