@@ -26,7 +26,7 @@ from crllk.protocol import TEST_EVALUATION, TEST_MODE_EVALUATION
 from crllk.tasks.actions import DISCRETE_NAMES
 from crllk.training.build import build_env
 from crllk.training.runs import (
-    MODE,
+    deployed_forms,
     load_actor,
     load_run_config,
     played_action,
@@ -153,7 +153,7 @@ def figure1_data(by_threshold: Mapping[float, Sequence[Path]],
                              "collisions": episode_cost(episode, "collision")},
             "evaluations": [read_eval_json(d, TEST_EVALUATION)["summary"] for d in run_dirs],
             "mode_evaluations": [m["summary"] for m in modes],
-            "deployed": sorted({m["evaluation"].get("deployed", MODE) for m in modes}),
+            "deployed": deployed_forms(modes),
             "final_lambda_lane": [float(read_metrics(d)["lambda_lane"][-1]) for d in run_dirs]}
     return data
 

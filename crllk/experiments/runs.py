@@ -25,6 +25,7 @@ from crllk.training.runs import (
     EXPECTED_DUTY,
     MODE,
     deployed_form,
+    deployed_forms,
     has_policy,
     keep_policy,
     load_run_policy,
@@ -140,13 +141,6 @@ class Outcome:
     """How many of the runs this invocation trained (the others were finished before it)."""
     evaluated: int = 0
     """How many evaluations (sampled and mode) this invocation made (the others were reused)."""
-
-
-def deployed_forms(documents: Sequence[Mapping[str, Any]]) -> list[str]:
-    """How the deployed policies of these evaluations acted
-    (:func:`crllk.training.runs.deployed_form`; ``mode`` for documents written before the
-    evaluations recorded it, when every deployed policy was its mode)."""
-    return sorted({d.get("evaluation", {}).get("deployed", MODE) for d in documents})
 
 
 def expected_duties_deployed(entries: Iterable[Mapping[str, Any]]) -> bool:

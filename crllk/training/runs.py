@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -93,6 +94,13 @@ def deployed_form(action: str) -> str:
     """How the deterministic (deployed) policy of a run with ``action`` acts:
     :data:`EXPECTED_DUTY` for discrete runs, :data:`MODE` for the others."""
     return EXPECTED_DUTY if action == "discrete" else MODE
+
+
+def deployed_forms(documents: Sequence[Mapping[str, Any]]) -> list[str]:
+    """How the deployed policies of these evaluation documents acted (:func:`deployed_form`;
+    :data:`MODE` for documents written before evaluations recorded it, when every deployed
+    policy was its mode)."""
+    return sorted({d.get("evaluation", {}).get("deployed", MODE) for d in documents})
 
 
 def played_action(config: TrainConfig, deterministic: bool) -> str:
