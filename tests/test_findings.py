@@ -40,7 +40,7 @@ def test_the_default_command_s_directions_are_its_evaluation():
 def test_the_annealed_teacher_table_is_the_runs(seed):
     import csv
 
-    run = REPO / f"results/runs/pixels/obstacle_loop/CRLLK-D-teacher0-a0.5-seed{seed}"
+    run = REPO / f"results/runs/pixels/obstacle_loop/CRLLK-D-teacher0-curve1-a0.5-seed{seed}"
     with (run / "metrics.csv").open() as handle:
         rows = list(csv.DictReader(handle))
 
@@ -74,7 +74,7 @@ def test_the_collision_critic_traces_are_the_runs():
                       if low <= int(r["frames"]) < high and r[column] not in ("nan", "")]
         return sum(values) / len(values)
 
-    runs = ["CRLLK-D-teacher0-a0.5-seed0", "CRLLK-D-teacher0-a0.5-seed1"]
+    runs = ["CRLLK-D-teacher0-curve1-a0.5-seed0", "CRLLK-D-teacher0-curve1-a0.5-seed1"]
     straight = [f"{mean(r, 'action_straight', 200_000, 350_000):.2f} → "
                 f"{mean(r, 'action_straight', 400_000, 600_000):.2f}" for r in runs]
     assert " | ".join(straight) in FINDINGS
@@ -318,8 +318,8 @@ def test_the_maps_without_obstacles_are_the_test_evaluations():
     assert "all runs but one sampled policy (CRLLK-C seed 2, J_coll 0.03)" in prose("index.md")
     assert "one run (zigzag, PPO-C seed 1 sampled, J_coll 0.03)" in camera
 
-COST_DISCOUNT_RUNS = (("default, seed 0", "CRLLK-D-a0.5-seed0"),
-                      ("default, seed 1", "CRLLK-D-a0.5-seed1"),
+COST_DISCOUNT_RUNS = (("default, seed 0", "CRLLK-D-curve1-a0.5-seed0"),
+                      ("default, seed 1", "CRLLK-D-curve1-a0.5-seed1"),
                       ("`ppo.cost_gamma=0.99`, seed 0", "CRLLK-D-costgamma99-a0.5-seed0"),
                       ("`ppo.cost_gamma=0.99`, seed 1", "CRLLK-D-costgamma99-a0.5-seed1"))
 """The cost-discount trial's rows in the findings: label and run directory."""
@@ -383,7 +383,7 @@ def test_the_cost_discount_rows_at_400_episodes_are_their_evaluations():
                 by_object[name] = by_object.get(name, 0) + count
     text = " ".join(FINDINGS.split())
     trial = [collisions[f"CRLLK-D-costgamma99-a0.5-seed{s}"] for s in (0, 1)]
-    default = [collisions[f"CRLLK-D-a0.5-seed{s}"] for s in (0, 1)]
+    default = [collisions[f"CRLLK-D-curve1-a0.5-seed{s}"] for s in (0, 1)]
     assert f"({sum(t[0] for t in trial)} collisions in 800 episodes against " \
            f"{sum(d[0] for d in default)})" in text
     assert f"seed 0's mode collides {trial[0][1]} times where the default's collides once" \
@@ -396,10 +396,10 @@ def test_the_cost_discount_rows_at_400_episodes_are_their_evaluations():
            f"{by_object['3 duckie (0.88, 0.88)']} ended on the duckie in the centre" in text
 
 
-CURVE_WEIGHT_RUNS = (("default, seed 0", "CRLLK-D-a0.5-seed0"),
-                     ("default, seed 1", "CRLLK-D-a0.5-seed1"),
-                     ("`encounter_curve_weight=4`, seed 0", "CRLLK-D-curve4-a0.5-seed0"),
-                     ("`encounter_curve_weight=4`, seed 1", "CRLLK-D-curve4-a0.5-seed1"))
+CURVE_WEIGHT_RUNS = (("default, seed 0", "CRLLK-D-curve1-a0.5-seed0"),
+                     ("default, seed 1", "CRLLK-D-curve1-a0.5-seed1"),
+                     ("`encounter_curve_weight=4`, seed 0", "CRLLK-D-a0.5-seed0"),
+                     ("`encounter_curve_weight=4`, seed 1", "CRLLK-D-a0.5-seed1"))
 """The curve-weight trial's rows in the findings: label and run directory."""
 
 
@@ -435,14 +435,14 @@ def test_the_curve_weight_rows_are_their_validation_evaluations():
             f"road, against {sum(d[0] for d in default)}") in text
     assert (f"({sum(t[1] for t in trial)} such endings in 800 against "
             f"{sum(d[1] for d in default)})") in text
-    modes = [json.loads((root / f"CRLLK-D-curve4-a0.5-seed{s}/val400-mode.json").read_text())
+    modes = [json.loads((root / f"CRLLK-D-a0.5-seed{s}/val400-mode.json").read_text())
              for s in (0, 1)]
     assert all(m["summary"]["J_clane"] > 0.5 for m in modes)
     assert (f"beyond α1 ({modes[0]['summary']['J_clane']:.3f} and "
             f"{modes[1]['summary']['J_clane']:.3f} dm)") in text
     lane_costs, lambdas = [], []
     for seed in (0, 1):
-        with (root / f"CRLLK-D-curve4-a0.5-seed{seed}/metrics.csv").open() as f:
+        with (root / f"CRLLK-D-a0.5-seed{seed}/metrics.csv").open() as f:
             rows = list(csv.DictReader(f))
         late = [r for r in rows if int(r["iteration"]) >= 400 and r["J_clane"] != "nan"]
         episodes = sum(float(r["episodes"]) for r in late)
@@ -454,20 +454,20 @@ def test_the_curve_weight_rows_are_their_validation_evaluations():
             f"iterations, λ_lane {lambdas[0]:.2f} at the end of both runs") in text
     assert lambdas[0] == lambdas[1]
     for seed in (0, 1):
-        sampled = json.loads((root / f"CRLLK-D-curve4-a0.5-seed{seed}/val400.json").read_text())
+        sampled = json.loads((root / f"CRLLK-D-a0.5-seed{seed}/val400.json").read_text())
         reverse = [d["breakdown"]["by_direction"]["reverse"]["J_clane"]
                    for d in (modes[seed], sampled)]
         assert 2 <= reverse[0] / reverse[1] <= 3  # "two to three times as much"
     ratios, pairs = [], []
     for seed in (0, 1):
-        sampled, mode = _val400_pair(root / f"CRLLK-D-a0.5-seed{seed}")
+        sampled, mode = _val400_pair(root / f"CRLLK-D-curve1-a0.5-seed{seed}")
         pair = [d["breakdown"]["by_direction"]["reverse"]["J_clane"] for d in (mode, sampled)]
         ratios.append(f"{pair[0] / pair[1]:.1f}")
         pairs.append(pair)
     assert (f"the default's modes deviate {ratios[0]} and {ratios[1]} times as much "
             f"({pairs[0][0]:.3f} and {pairs[1][0]:.3f} dm against {pairs[0][1]:.3f} and "
             f"{pairs[1][1]:.3f})") in text
-    config = (root / "CRLLK-D-curve4-a0.5-seed0" / "config.yaml").read_text()
+    config = (root / "CRLLK-D-a0.5-seed0" / "config.yaml").read_text()
     assert "encounter_curve_weight: 4.0" in config
 
 
@@ -517,7 +517,7 @@ def test_the_lane_target_rows_are_their_validation_evaluations():
         mode_hits.append(int(sum(e["cost_collision"] for e in mode["episodes"])))
         lane_lambdas.append(multipliers["lane"])
         mode_lanes.append(mode["summary"]["J_clane"])
-    alone = [_val400_pair(root / f"CRLLK-D-curve4-a0.5-seed{s}")[0] for s in (0, 1)]
+    alone = [_val400_pair(root / f"CRLLK-D-a0.5-seed{s}")[0] for s in (0, 1)]
     assert all(a["source"]["multipliers"]["lane"] == 0.0 for a in alone)
     assert f"λ_lane ends between {min(lane_lambdas):.2f} and {max(lane_lambdas):.2f}" in text
     alone_hits = [int(sum(e["cost_collision"] for e in a["episodes"])) for a in alone]
@@ -587,15 +587,15 @@ def test_the_closer_teacher_and_crllk_c_curve_weight_rows_are_their_evaluations(
         assert ("margin: 0.05" in config) == ("margin5cm" in run)
         counts[run] = (_endings(sampled), _endings(mode), mode["summary"]["J_clane"])
     closer = [counts[run] for _, run in CLOSER_TEACHER_RUNS]
-    alone = [tuple(map(_endings, _val400_pair(root / f"CRLLK-D-curve4-a0.5-seed{s}")))
+    alone = [tuple(map(_endings, _val400_pair(root / f"CRLLK-D-a0.5-seed{s}")))
              for s in (0, 1)]
-    alone_mode = json.loads((root / "CRLLK-D-curve4-a0.5-seed0/val400-mode.json").read_text())
+    alone_mode = json.loads((root / "CRLLK-D-a0.5-seed0/val400-mode.json").read_text())
     assert closer[0][2] > alone_mode["summary"]["J_clane"] > 0.5
     assert (f"Seed 0 ended {closer[0][0]} of its 400 sampled episodes on an obstacle or off the "
             f"road (against {alone[0][0]} with the 7 cm teacher) and its mode none, but that "
             f"mode deviates {closer[0][2]:.3f} dm, further beyond α1 than with the 7 cm "
             f"teacher ({alone_mode['summary']['J_clane']:.3f} dm)") in text and closer[0][1] == 0
-    alone_mode1 = json.loads((root / "CRLLK-D-curve4-a0.5-seed1/val400-mode.json").read_text())
+    alone_mode1 = json.loads((root / "CRLLK-D-a0.5-seed1/val400-mode.json").read_text())
     assert closer[1][2] <= 0.5
     assert (f"seed 1's mode held α1 ({closer[1][2]:.3f} dm, against "
             f"{alone_mode1['summary']['J_clane']:.3f}), but seed 1 ended {closer[1][0]} of its "
@@ -634,9 +634,9 @@ def test_the_closer_teacher_and_crllk_c_curve_weight_rows_are_their_evaluations(
             f"{hits[1][curve_duckie]})") in text
 
 
-DEPLOYED_RUNS = (("default, seed 0", "CRLLK-D-a0.5-seed0"),
-                 ("default, seed 1", "CRLLK-D-a0.5-seed1"),
-                 *((f"`encounter_curve_weight=4`, seed {s}", f"CRLLK-D-curve4-a0.5-seed{s}")
+DEPLOYED_RUNS = (("default, seed 0", "CRLLK-D-curve1-a0.5-seed0"),
+                 ("default, seed 1", "CRLLK-D-curve1-a0.5-seed1"),
+                 *((f"`encounter_curve_weight=4`, seed {s}", f"CRLLK-D-a0.5-seed{s}")
                    for s in (0, 1, 2)))
 """The rows of the deployed-policy trial: label and run directory."""
 

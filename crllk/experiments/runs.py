@@ -17,8 +17,10 @@ import torch
 from joblib import Parallel, delayed
 
 from crllk.config import algo_thresholds
+from crllk.errors import ConfigError
 from crllk.evaluation.report import PAPER_CONSTRAINTS, aggregate, format_summary
 from crllk.evaluation.runs import EVALUATION_ENVS, evaluate_run
+from crllk.experiments.provenance import describe, stale_settings
 from crllk.protocol import TEST_EPISODES, TEST_EVALUATION, TEST_MODE_EVALUATION, TEST_SEED
 from crllk.training.runs import (
     EVAL_FILE,
@@ -246,13 +248,46 @@ def _sweep_command(specs: Sequence[RunSpec], settings: Settings) -> list[str]:
     task, folder = ((f"task_file={spec.task_file}", spec.task_folder) if spec.task_file
                     else (f"task={values('task')}", "${task.name}"))
     return [sys.executable, "-m", "crllk.train", "-m", f"agent={values('agent')}",
-            task, f"seed={values('seed')}", f"obs={settings.obs}",
-            f"algo.constraints.lane.threshold={spec.lane_threshold}",
-            f"algo.constraints.collision.threshold={THRESHOLDS['collision']}",
-            f"total_frames={settings.frames}",
+            task, f"seed={values('seed')}",
+            *_training_overrides(spec, settings),
             f"run_dir={settings.runs_root}/{folder}/{name}-seed${{seed}}",
             "resume=true", "progress=false", "threads=1", "workers=1",
             f"hydra.launcher.n_jobs={settings.jobs}", *settings.train_overrides, *spec.extra]
+
+
+def _training_overrides(spec: RunSpec, settings: Settings) -> list[str]:
+    """The trainer settings every run of ``spec``'s sweep shares, besides its own extras."""
+    return [f"obs={settings.obs}", f"algo.constraints.lane.threshold={spec.lane_threshold}",
+            f"algo.constraints.collision.threshold={THRESHOLDS['collision']}",
+            f"total_frames={settings.frames}"]
+
+
+def run_overrides(spec: RunSpec, settings: Settings) -> list[str]:
+    """The trainer overrides of the one run ``spec`` (as its sweep trains it)."""
+    task = f"task_file={spec.task_file}" if spec.task_file else f"task={spec.task}"
+    return [f"agent={spec.agent}", task, f"seed={spec.seed}",
+            *_training_overrides(spec, settings), *settings.train_overrides, *spec.extra]
+
+
+def check_provenance(specs: Sequence[RunSpec], settings: Settings) -> None:
+    """Refuses to reuse a finished run trained with other settings than its experiment
+    trains now (:func:`crllk.experiments.provenance.stale_settings`).
+
+    Raises:
+        ConfigError: one line naming each such run and its settings.
+    """
+    stale = []
+    for spec in specs:
+        run_dir = spec.directory(settings.runs_root)
+        if (run_dir / "config.yaml").is_file():
+            differences = stale_settings(run_dir, run_overrides(spec, settings),
+                                         task_file=spec.task_file or None)
+            if differences:
+                stale.append(describe(run_dir, differences))
+    if stale:
+        raise ConfigError(SOURCE, "runs", "trained with other settings than this experiment "
+                          "trains now; move them aside to train them again: "
+                          + "; ".join(stale))
 
 
 def run_sweeps(commands: Sequence[list[str]], log: Path) -> None:
@@ -296,6 +331,7 @@ def train_and_evaluate(specs: Sequence[RunSpec], settings: Settings,
     root = settings.runs_root
     to_train = [s for s in specs if trained_frames(s.directory(root)) < settings.frames
                 or (s in policies and not has_policy(s.directory(root)))]
+    check_provenance(specs, settings)
     print(f"training {len(to_train)} of {len(specs)} runs ({settings.jobs} at a time)",
           flush=True)
     log = root / "sweeps.log"
