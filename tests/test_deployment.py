@@ -51,7 +51,7 @@ def _recorded_observations(run, count: int = RECORDED):
     action type they are in."""
     config = load_run_config(run)
     env = build_env(config, num_envs=16, seed=7, action=played_action(config, True))
-    actor, _ = load_actor(run, env)
+    actor, _ = load_actor(run, env, deployed=True)
     observations, actions = [], []
     td = env.reset()
     with torch.no_grad(), set_exploration_type(ExplorationType.DETERMINISTIC):

@@ -47,4 +47,4 @@ def test_a_discrete_actor_built_for_duty_actions_keeps_its_three_actions():
 
 def test_deployed_form():
     assert deployed_form("discrete") == "expected_duty"
-    assert deployed_form("continuous") == deployed_form("stoppable") == "mode"
+    assert deployed_form("continuous") == deployed_form("stoppable") == "expected_action"

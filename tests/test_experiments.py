@@ -33,11 +33,11 @@ def test_table1_lists_every_agent_beside_the_paper(tiny_experiments):
         assert entry["J_clane"]["values"] == [test["summary"]["J_clane"]]
         assert entry["frames"] == [16]
         # the deployed policy (a discrete agent's expected duties, a continuous agent's
-        # mode), played through the same test episodes
+        # expected action), played through the same test episodes
         mode = json.loads((run / f"{MODE_EVALUATION}.json").read_text())
         assert mode["evaluation"]["deterministic"] is True
         assert mode["evaluation"]["deployed"] == (
-            "expected_duty" if agent.endswith("-D") else "mode")
+            "expected_duty" if agent.endswith("-D") else "expected_action")
         assert entry["mode"]["deployed"] == [mode["evaluation"]["deployed"]]
         assert mode["evaluation"]["seed"] == TEST_SEED
         assert entry["mode"]["J_coll"]["values"] == [mode["summary"]["J_coll"]]
@@ -45,8 +45,9 @@ def test_table1_lists_every_agent_beside_the_paper(tiny_experiments):
     assert markdown == table_markdown(document)
     assert "| J_coll, deployed policy |" in markdown
     assert "CRLLK-D's deployed policy (expected duties)" in markdown
-    assert "CRLLK-C's deployed policy (mode)" in markdown
+    assert "CRLLK-C's deployed policy (expected action)" in markdown
     assert "a discrete agent's expected wheel duties" in markdown
+    assert "a continuous agent's expected action" in markdown
     assert "Budget: 16 environment frames per run" in markdown
     assert "Observation: `pixels`" in markdown and "python -m crllk.experiments all" in markdown
     assert "| J_clane (paper) | 0.66 ± 0.02 | 0.99 ± 0.07 | 0.31 ± 0.00 | 1.04 ± 0.25 | |" \
@@ -127,13 +128,20 @@ def test_figure1_words_compare_with_the_farthest_fixed_pair_holding_on_every_see
 
 def test_deployed_label_names_what_the_evaluations_played():
     """Aggregates written before evaluations recorded how the deployed policy acted are the
-    mode; all expected duties, or a mix of discrete and continuous agents, say so."""
-    from crllk.experiments.runs import deployed_label, mode_aggregate
+    mode; all expected duties, all expected actions, or a mix, say so; the note names a
+    continuous agent's expected action only where its evaluations played it."""
+    from crllk.experiments.runs import deployed_label, deployed_note, mode_aggregate
 
     old, duties, mode = {"J_coll": {}}, {"deployed": ["expected_duty"]}, {"deployed": ["mode"]}
+    action = {"deployed": ["expected_action"]}
     assert deployed_label([old, None]) == deployed_label([mode]) == "deployed policy (mode)"
     assert deployed_label([duties, None]) == "deployed policy (expected duties)"
-    assert deployed_label([duties, mode]) == "deployed policy"
+    assert deployed_label([action]) == "deployed policy (expected action)"
+    assert deployed_label([duties, mode]) == deployed_label([duties, action]) == \
+        "deployed policy"
+    assert deployed_note([duties, mode]).endswith("a continuous agent's mode")
+    assert "a continuous agent's expected action (the mean of its tanh-squashed" in \
+        deployed_note([duties, action, None])
     summary = {"J_R": 2.0, "J_clane": 0.1, "J_coll": 0.0, "episode_length": 512,
                "satisfied": True}
     documents = [{"source": {"run_dir": "a"}, "summary": summary,
@@ -343,18 +351,18 @@ def test_a_finished_run_without_its_checkpoint_is_reused(tiny_experiments, tmp_p
     assert trained_frames(tmp_path / "nothing") == 0
 
 
-def test_a_discrete_mode_evaluated_before_expected_duties_is_not_current(tiny_experiments,
-                                                                        tmp_path):
-    """The deployed policy of a discrete run is its expected duties: its test-mode evaluation
-    written before (the argmax, no ``deployed`` in its settings) is evaluated again; a
-    continuous run's mode, the same policy as before, stays current."""
+def test_a_mode_evaluated_before_the_expected_forms_is_not_current(tiny_experiments,
+                                                                  tmp_path):
+    """The deployed policy of a discrete run is its expected duties, of a continuous run its
+    expected action: a test-mode evaluation written before (the argmax or tanh of the mean,
+    no ``deployed`` in its settings) is evaluated again."""
     import shutil
 
     from crllk.experiments.runs import Settings, evaluation_is_current
 
     runs, _, _ = tiny_experiments
     settings = Settings(frames=16, episodes=2)
-    for agent, current_without in (("CRLLK-D", False), ("CRLLK-C", True)):
+    for agent, current_without in (("CRLLK-D", False), ("CRLLK-C", False)):
         kept = tmp_path / agent
         shutil.copytree(runs / "small_loop" / f"{agent}-a0.5-seed0", kept)
         assert evaluation_is_current(kept, settings, MODE_EVALUATION, deterministic=True)

@@ -122,7 +122,7 @@ def play_endings(run_dir: Path, episodes: int, seconds: float,
                     action=played_action(config, deterministic))
     quotas = episode_quotas(episodes, env.num_envs).tolist()
     try:
-        actor, _ = load_actor(run_dir, env)
+        actor, _ = load_actor(run_dir, env, deployed=deterministic)
         length = max(1, round(seconds / env.config.control_timestep))
         windows = [deque(maxlen=length) for _ in range(env.num_envs)]
         found: list[Ending] = []

@@ -106,7 +106,7 @@ def policy_trajectory(run_dir: str | Path, *, seed: int | None = None,
     seed = config.eval.seed if seed is None else seed
     env = build_env(config, num_envs=1, seed=seed, action=played_action(config, deterministic))
     try:
-        actor, _ = load_actor(run_dir, env)
+        actor, _ = load_actor(run_dir, env, deployed=deterministic)
         physics, task = env.physics[0], env.tasks[0]
         td = env.reset()
         trail, actions, lane_costs, distance = [physics.pose()[:2]], [], [], 0.0

@@ -3,10 +3,10 @@
 The input is what the trained policy reads, without a batch dimension: one camera image as
 uint8 H×W×3 RGB (pixel runs) or the state features as float32 (state runs). The output is the
 two wheel duty cycles (left, right) as float32, through the run's own action mapping
-(:mod:`crllk.tasks.actions`), of the policy's deterministic action: the expected duties of
-the three discrete actions under the policy's probabilities (:mod:`crllk.rl.expected_duty`),
-or tanh of the Gaussian mean for continuous actions (the mode of the squashed distribution's
-base, as TorchRL's deterministic exploration takes it).
+(:mod:`crllk.tasks.actions`), of the policy's deployed action: the expected duties of the
+three discrete actions under the policy's probabilities (:mod:`crllk.rl.expected_duty`), or the
+expected action of a Gaussian policy, the mean of its tanh-squashed actions
+(:mod:`crllk.rl.expected_action`).
 """
 
 from __future__ import annotations
@@ -16,6 +16,7 @@ from torch import nn
 from torchrl.modules import ProbabilisticActor
 
 from crllk.deployment.onnx_names import EXPORTABLE_ACTIONS
+from crllk.rl.expected_action import ExpectedAction
 from crllk.rl.expected_duty import ExpectedDuty
 from crllk.sim.constants import WHEEL_DISTANCE, WHEEL_RADIUS
 from crllk.tasks import actions
@@ -35,13 +36,14 @@ class DeployedPolicy(nn.Module):
         self.network = network
         self.action = action
         self.expected_duty = ExpectedDuty()
+        self.expected_action = ExpectedAction()
 
     def forward(self, observation: torch.Tensor) -> torch.Tensor:
         batch = observation.unsqueeze(0)
         if self.action == "discrete":
             return self.expected_duty(self.network(batch))[0]
-        loc, _ = self.network(batch)
-        velocity, steering = torch.tanh(loc[0]).clamp(-1.0, 1.0).unbind(-1)
+        loc, scale = self.network(batch)
+        velocity, steering = self.expected_action(loc[0], scale[0]).clamp(-1.0, 1.0).unbind(-1)
         if self.action in actions.LEAST_MEAN_DUTY:
             return drive_turn_duties(velocity, steering, actions.LEAST_MEAN_DUTY[self.action])
         return velocity_steering_duties(velocity, steering)

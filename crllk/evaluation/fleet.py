@@ -127,7 +127,7 @@ def evaluate_fleet(run_dir: str | Path, *, robots: int, episodes: int,
                         action=played_action(config, deterministic))
         try:
             board = join_fleet(env)
-            actor, info = load_actor(run_dir, env)
+            actor, info = load_actor(run_dir, env, deployed=deterministic)
             with torch.random.fork_rng():
                 torch.manual_seed(seed)
                 result, hit_robots = play_fleet(env, actor, board, episodes,

@@ -125,7 +125,7 @@ def evaluate_run(run_dir: str | Path, *, episodes: int, deterministic: bool = Fa
         env = build_eval_env(config, num_envs=num_envs, seed=seed,
                              action=played_action(config, deterministic))
         try:
-            actor, info = load_actor(run_dir, env)
+            actor, info = load_actor(run_dir, env, deployed=deterministic)
             result = run_episodes(env, actor, episodes, deterministic=deterministic,
                                   sample_seed=seed)
         finally:
@@ -230,7 +230,7 @@ def record_run(run_dir: str | Path, *, episodes: int, seed: int | None = None,
         env = build_env(config, num_envs=1, seed=config.eval.seed if seed is None else seed,
                         action=played_action(config, deterministic))
         try:
-            actor, info = load_actor(run_dir, env)
+            actor, info = load_actor(run_dir, env, deployed=deterministic)
             report = record_episodes(env, actor, episodes, path, deterministic=deterministic,
                                      viewer=viewer, multipliers=info["multipliers"],
                                      recording_id=f"crllk-eval-{Path(run_dir).resolve()}")

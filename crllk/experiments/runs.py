@@ -24,6 +24,7 @@ from crllk.experiments.provenance import describe, stale_settings
 from crllk.protocol import TEST_EPISODES, TEST_EVALUATION, TEST_MODE_EVALUATION, TEST_SEED
 from crllk.training.runs import (
     EVAL_FILE,
+    EXPECTED_ACTION,
     EXPECTED_DUTY,
     MODE,
     deployed_form,
@@ -145,11 +146,20 @@ class Outcome:
     """How many evaluations (sampled and mode) this invocation made (the others were reused)."""
 
 
-def expected_duties_deployed(entries: Iterable[Mapping[str, Any]]) -> bool:
+EXPECTED_FORMS = {EXPECTED_DUTY: "expected duties", EXPECTED_ACTION: "expected action"}
+"""The deployed policies' forms that replaced the mode, and how tables name them."""
+
+
+def _forms(entries: Iterable[Mapping[str, Any] | None]) -> set[str]:
+    return {form for entry in entries if entry is not None
+            for form in entry.get("deployed", (MODE,))}
+
+
+def expected_forms_deployed(entries: Iterable[Mapping[str, Any]]) -> bool:
     """Whether any of these aggregates of deployed policies (``"mode"`` entries of a table)
-    drove its expected duties: their tables then describe the deployed policy as
-    :data:`DEPLOYED_NOTE` does, and older tables keep calling it the mode."""
-    return any(EXPECTED_DUTY in entry.get("deployed", ()) for entry in entries)
+    played an expected form (:data:`EXPECTED_FORMS`): their tables then describe the deployed
+    policy as :func:`deployed_note` does, and older tables keep calling it the mode."""
+    return bool(_forms(entries) & set(EXPECTED_FORMS))
 
 
 def mode_aggregate(documents: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
@@ -161,18 +171,22 @@ def mode_aggregate(documents: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
 def deployed_label(entries: Iterable[Mapping[str, Any] | None]) -> str:
     """How a table names its deployed policies (``"mode"`` aggregates, None where missing):
     by what they played; tables of argmax evaluations keep calling them the mode."""
-    found = [e for e in entries if e is not None]
-    if not expected_duties_deployed(found):
+    forms = _forms(entries)
+    if not forms & set(EXPECTED_FORMS):
         return "deployed policy (mode)"
-    if all(e.get("deployed") == [EXPECTED_DUTY] for e in found):
-        return "deployed policy (expected duties)"
+    if len(forms) == 1:
+        return f"deployed policy ({EXPECTED_FORMS[forms.pop()]})"
     return "deployed policy"
 
 
-DEPLOYED_NOTE = ("the policy `crllk.export` writes for the robot: a discrete agent's expected "
-                 "wheel duties (its three duty pairs weighted by their probabilities), a "
-                 "continuous agent's mode")
-"""What a table's *deployed policy* is, once its discrete agents deploy expected duties."""
+def deployed_note(entries: Iterable[Mapping[str, Any] | None]) -> str:
+    """What a table's *deployed policy* is, once its discrete agents deploy expected duties:
+    a continuous agent's expected action where its evaluations played it, else its mode."""
+    gaussian = ("expected action (the mean of its tanh-squashed Gaussian's actions)"
+                if EXPECTED_ACTION in _forms(entries) else "mode")
+    return ("the policy `crllk.export` writes for the robot: a discrete agent's expected "
+            "wheel duties (its three duty pairs weighted by their probabilities), a "
+            f"continuous agent's {gaussian}")
 
 
 # ----- running ------------------------------------------------------------------------------

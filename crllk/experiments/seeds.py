@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from crllk.evaluation.report import DIRECTIONS
-from crllk.experiments.runs import DEPLOYED_NOTE, MAP_TASKS, expected_duties_deployed
+from crllk.experiments.runs import MAP_TASKS, deployed_note, expected_forms_deployed
 from crllk.files import atomic_write_text
 from crllk.paths import task_file, task_names
 from crllk.protocol import TEST_SEED
@@ -160,11 +160,13 @@ def seeds_markdown(documents: Mapping[str, Mapping[str, Any]]) -> str:
         *seeds_table(documents), ""]
     with_mode = any("mode" in entry for document in documents.values()
                     for entry in document["agents"].values())
-    expected = expected_duties_deployed(entry["mode"] for document in documents.values()
+    expected = expected_forms_deployed(entry["mode"] for document in documents.values()
                                         for entry in document["agents"].values()
                                         if "mode" in entry)
     if with_mode and expected:
-        lines += [f"## The deployed policy ({DEPLOYED_NOTE})", "",
+        note = deployed_note(entry.get("mode") for document in documents.values()
+                             for entry in document["agents"].values())
+        lines += [f"## The deployed policy ({note})", "",
                   *seeds_table(documents, mode=True), ""]
     elif with_mode:
         lines += ["## The deployed policy (the most probable action, what `crllk.export` "
@@ -190,7 +192,7 @@ def _directions_note(task: str) -> str:
 def direction_table(document: Mapping[str, Any], mode: bool = False) -> list[str]:
     """A row per agent and seed, a column per start direction, of one table document's
     runs (with ``mode``: of the deployed policies)."""
-    expected = expected_duties_deployed(entry["mode"] for entry in document["agents"].values()
+    expected = expected_forms_deployed(entry["mode"] for entry in document["agents"].values()
                                         if "mode" in entry)
     label = ("sampled policy" if not mode else "deployed policy" if expected
              else "deployed policy (mode)")

@@ -13,13 +13,13 @@ from typing import Any
 from crllk.evaluation.report import PAPER_CONSTRAINTS, aggregate
 from crllk.evaluation.runs import evaluate_follower
 from crllk.experiments.runs import (
-    DEPLOYED_NOTE,
     PAPER_J_R_PER_METRE,
     THRESHOLDS,
     Outcome,
     Settings,
     deployed_label,
-    expected_duties_deployed,
+    deployed_note,
+    expected_forms_deployed,
     mode_aggregate,
 )
 from crllk.experiments.seeds import write_seeds
@@ -149,7 +149,7 @@ def table_markdown(document: dict[str, Any]) -> str:
             suffix = f" (paper, ≈ {PAPER_J_R_PER_METRE:g} per m)" if metric == "J_R" else " (paper)"
             rows.append(f"| {metric}{suffix} | " + " | ".join(paper_cells) + " | |")
     with_mode = any("mode" in results[a] for a in agents)
-    expected = expected_duties_deployed(results[a]["mode"] for a in agents
+    expected = expected_forms_deployed(results[a]["mode"] for a in agents
                                         if "mode" in results[a])
     deployed_row = "deployed policy" if expected else "deployed policy (mode)"
     if with_mode:
@@ -176,7 +176,8 @@ def table_markdown(document: dict[str, Any]) -> str:
            if settings["eval_seed"] == TEST_SEED else
            "(a validation seed, not the test protocol's; never a training seed)")
         + ", the last checkpoint" + (
-            f"; the rows marked *deployed policy* play the same episodes with {DEPLOYED_NOTE}."
+            "; the rows marked *deployed policy* play the same episodes with "
+            + deployed_note(results[a].get("mode") for a in agents) + "."
             if with_mode and expected else
             "; the rows marked *deployed policy (mode)* play the same episodes with the most "
             "probable action, the policy `crllk.export` wrote for the robot when these were "

@@ -23,7 +23,7 @@ from crllk.evaluation.community import FORMATS, METRICS
 from crllk.evaluation.report import aggregate
 from crllk.evaluation.runs import evaluate_follower
 from crllk.experiments.runs import (
-    EXPECTED_DUTY,
+    EXPECTED_FORMS,
     Outcome,
     RunSpec,
     Settings,
@@ -231,6 +231,7 @@ __all__ = ["STOPPABLE", "TEACHER_ACTIONS", "TRAFFIC_AGENTS", "TRAFFIC_TASKS", "a
 
 
 def _deployed_short(entry: Mapping[str, Any]) -> str:
-    """The policy column's name for a deployed policy: ``mode``, or ``expected duties`` where
-    its evaluations played those."""
-    return "expected duties" if EXPECTED_DUTY in entry.get("deployed", ()) else "mode"
+    """The policy column's name for a deployed policy: ``mode``, or ``expected duties`` or
+    ``expected action`` where its evaluations played those."""
+    forms = entry.get("deployed", ())
+    return next((EXPECTED_FORMS[f] for f in EXPECTED_FORMS if f in forms), "mode")

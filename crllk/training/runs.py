@@ -86,14 +86,19 @@ def keep_policy(run_dir: str | Path) -> Path | None:
 
 EXPECTED_DUTY = "expected_duty"
 """How a discrete run's deployed policy acts (:mod:`crllk.rl.expected_duty`)."""
+EXPECTED_ACTION = "expected_action"
+"""How a Gaussian run's deployed policy acts: the mean of its squashed actions
+(:mod:`crllk.rl.expected_action`)."""
 MODE = "mode"
-"""How a Gaussian run's deployed policy acts: tanh of its mean, TorchRL's deterministic action."""
+"""How deployed policies acted before: a discrete run's most probable action, a Gaussian
+run's tanh of its mean (TorchRL's deterministic action). Evaluations that do not say how their
+deployed policy acted played it."""
 
 
 def deployed_form(action: str) -> str:
     """How the deterministic (deployed) policy of a run with ``action`` acts:
-    :data:`EXPECTED_DUTY` for discrete runs, :data:`MODE` for the others."""
-    return EXPECTED_DUTY if action == "discrete" else MODE
+    :data:`EXPECTED_DUTY` for discrete runs, :data:`EXPECTED_ACTION` for the others."""
+    return EXPECTED_DUTY if action == "discrete" else EXPECTED_ACTION
 
 
 def deployed_forms(documents: Sequence[Mapping[str, Any]]) -> list[str]:
@@ -109,12 +114,16 @@ def played_action(config: TrainConfig, deterministic: bool) -> str:
     return "duty" if deterministic and config.action.name == "discrete" else config.action.name
 
 
-def load_actor(run_dir: str | Path, env: Any) -> tuple[torch.nn.Module, dict[str, Any]]:
+def load_actor(run_dir: str | Path, env: Any,
+               deployed: bool = False) -> tuple[torch.nn.Module, dict[str, Any]]:
     """The run's policy (:func:`load_run_policy`) built for ``env``, and its counters
-    (``iteration``, ``frames``, ``elapsed``) and multipliers. A discrete run's policy for an
-    environment of ``duty`` actions (:func:`played_action`) is its deployed one: its expected
-    wheel duties (:func:`crllk.rl.expected_duty.expected_duty_policy`)."""
+    (``iteration``, ``frames``, ``elapsed``) and multipliers. With ``deployed`` it is the
+    deployed policy (:func:`deployed_form`): a Gaussian run's expected action
+    (:func:`crllk.rl.expected_action.expected_action_policy`), a discrete run's expected wheel
+    duties (:func:`crllk.rl.expected_duty.expected_duty_policy`), which is also what a discrete
+    run plays in an environment of ``duty`` actions (:func:`played_action`)."""
     from crllk.algos import build_learner
+    from crllk.rl.expected_action import expected_action_policy
     from crllk.rl.expected_duty import expected_duty_policy
 
     config = load_run_config(run_dir)
@@ -122,8 +131,13 @@ def load_actor(run_dir: str | Path, env: Any) -> tuple[torch.nn.Module, dict[str
     actor = build_learner(config, env).actor
     actor.load_state_dict(state["actor"])
     actor.eval()
-    if config.action.name == "discrete" and env.action_type == "duty":
+    if config.action.name == "discrete" and (deployed or env.action_type == "duty"):
+        if env.action_type != "duty":
+            raise ValueError("a discrete run's deployed policy plays in an environment of duty "
+                             "actions (played_action)")
         return expected_duty_policy(actor).eval(), policy_info(state)
+    if deployed:
+        return expected_action_policy(actor).eval(), policy_info(state)
     return actor, policy_info(state)
 
 
