@@ -193,8 +193,10 @@ def test_aids_writes_its_documents(tmp_path, monkeypatch):
     assert list(teacher_document["maps"]["small_loop"]) == list(TEACHER_VARIANTS)
 
 
-def test_the_kept_teacher_markdown_is_rebuilt_unchanged():
-    path = REPO / "results" / "pixels" / "teacher.json"
+@pytest.mark.parametrize(("name", "writer"), [("teacher", teacher_markdown),
+                                              ("aids", aids_markdown)])
+def test_the_kept_ablation_markdown_is_rebuilt_unchanged(name, writer):
+    path = REPO / "results" / "pixels" / f"{name}.json"
     if not path.is_file():
-        pytest.skip("no teacher.json kept")
-    assert teacher_markdown(json.loads(path.read_text())) == path.with_suffix(".md").read_text()
+        pytest.skip(f"no {name}.json kept")
+    assert writer(json.loads(path.read_text())) == path.with_suffix(".md").read_text()

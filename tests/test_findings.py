@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 import pytest
@@ -686,3 +687,87 @@ def test_the_deployed_policy_rows_are_their_validation_evaluations():
                         < min(r[k]["breakdown"]["by_direction"]["intended"]["J_clane"]
                               for k in (0, 1)) for r in rows)
     assert least_blocked == 4 and "(in the blocked direction on four of five)" in text
+    weighted, former = (sum(_endings(r[0]) for r in part) for part in (rows[2:], rows[:2]))
+    assert (f"their sampled policies ended {weighted} of 1,200 validation episodes on an "
+            f"obstacle or off the road, against {former} of 800 for the former default") in text
+
+
+NOENTROPY_RUNS = (("default, seed 0", "CRLLK-C-a0.5-seed0"),
+                  ("default, seed 1", "CRLLK-C-a0.5-seed1"),
+                  ("`ppo.entropy_coeff=0`, seed 0", "CRLLK-C-noentropy-a0.5-seed0"),
+                  ("`ppo.entropy_coeff=0`, seed 1", "CRLLK-C-noentropy-a0.5-seed1"))
+
+
+def _steering_scale(run: Path) -> float:
+    """σ of a Gaussian policy's steering before the tanh, as its run ended."""
+    import torch
+
+    actor = torch.load(run / "policy.pt", weights_only=True, map_location="cpu")["actor"]
+    return next(v for k, v in actor.items() if k.endswith("log_std")).exp()[1].item()
+
+
+def test_the_crllk_c_noise_and_no_bonus_rows_are_the_runs():
+    """The CRLLK-C section: the endings of the default runs' sampled validation episodes by
+    obstacle, the steering noise of every Gaussian run from pixels, and the no-bonus rows."""
+    import csv
+
+    root = REPO / "results/runs/pixels/obstacle_loop"
+    text = " ".join(FINDINGS.split())
+    endings = [e for s in (0, 1) for e in json.loads(
+        (root / f"CRLLK-C-a0.5-seed{s}/eval-400.json").read_text())["episodes"]
+        if e["cost_collision"] > 0]
+    curve = sum(e["hit_object"] == 3 for e in endings)
+    cone = sum(e["hit_object"] == 2 and e["direction"] == "reverse" for e in endings)
+    assert (f"end {len(endings)} times on an obstacle or off the road: {curve} times on the "
+            f"curve duckie, {cone} times on the cone of the right column in the reverse "
+            f"direction, whose lane it does not block, and {len(endings) - curve - cone} times "
+            "elsewhere") in text
+    scales = [_steering_scale(p.parent) for p in (REPO / "results/runs/pixels").glob(
+        "*/*-C-*/policy.pt")]
+    assert len(scales) >= 20
+    assert f"from 0.61 at the start to {min(scales):.2f}–{max(scales):.2f} in every kept" in text
+    assert math.isclose(math.exp(-0.5), 0.61, abs_tol=0.005)
+    for label, run in NOENTROPY_RUNS:
+        with (root / run / "metrics.csv").open() as handle:
+            late = [float(r["J_coll"]) for r in csv.DictReader(handle)
+                    if 400 <= int(r["iteration"]) <= 489 and r["J_coll"] not in ("", "nan")]
+        final = json.loads((root / run / "eval.json").read_text())
+        assert final["evaluation"]["episodes"] == 100
+        summary = final["summary"]
+        assert (f"| {label} | {_steering_scale(root / run):.2f} | {sum(late) / len(late):.3f} | "
+                f"{summary['J_clane']:.3f} / {summary['J_coll']:.2f} / {summary['J_R']:.2f} |"
+                ) in FINDINGS
+    for _, run in NOENTROPY_RUNS[2:]:
+        assert "  entropy_coeff: 0.0\n" in (root / run / "config.yaml").read_text()
+
+
+def test_the_expected_action_rows_are_their_validation_evaluations():
+    """The expected-action trial: sampled (``eval-400``), tanh of the mean (``val400-mode``,
+    recorded before the deployed form was) and the expected action (``val400-deployed``), all
+    400 validation episodes; the prose's counts."""
+    root = REPO / "results/runs/pixels/obstacle_loop"
+    text = " ".join(FINDINGS.split())
+    rows = []
+    for seed in (0, 1):
+        run = root / f"CRLLK-C-a0.5-seed{seed}"
+        sampled, mode, deployed = (json.loads((run / f"{n}.json").read_text())
+                                   for n in ("eval-400", "val400-mode", "val400-deployed"))
+        assert deployed["evaluation"] == {"episodes": 400, "seed": 1_000_000, "num_envs": 10,
+                                          "deterministic": True,
+                                          "deployed": "expected_action"}
+        assert "deployed" not in mode["evaluation"] and mode["evaluation"]["deterministic"]
+        assert sampled["evaluation"]["deterministic"] is False
+        assert (f"| seed {seed} | {_val400_cell(sampled)} | {_val400_cell(mode)} | "
+                f"{_val400_cell(deployed)} |") in FINDINGS
+        rows.append((sampled, mode, deployed))
+    ends = [sum(_endings(r[k]) for r in rows) for k in range(3)]
+    assert (f"ended {ends[2]} of their 800 episodes on an obstacle or off the road, against "
+            f"{ends[0]} for the sampled policies and {ends[1]} for tanh of the mean") in text
+    lanes = " and ".join(f"{r[2]['summary']['J_clane']:.3f}" for r in rows)
+    assert f"(J_clane {lanes} dm)" in text
+    for sampled, mode, deployed in rows:
+        assert deployed["summary"]["J_clane"] < min(sampled["summary"]["J_clane"],
+                                                    mode["summary"]["J_clane"])
+        reverse = [d["breakdown"]["by_direction"]["reverse"]["J_clane"]
+                   for d in (sampled, mode, deployed)]
+        assert reverse[2] < min(reverse[:2])

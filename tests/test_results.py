@@ -23,6 +23,19 @@ SWEEPS = sorted(RESULTS.glob("*/sweep.json"))
 ROBUSTNESS = sorted(RESULTS.glob("*/robustness.json"))
 
 
+def test_every_run_a_results_document_names_is_kept():
+    """A run directory named in a committed results document exists (a renamed run is renamed
+    in the documents too)."""
+    import re
+
+    named = {(document.relative_to(REPO), run)
+             for document in RESULTS.glob("*/*.json")
+             for run in re.findall(r'"(results/runs/[^"]+?-seed\d+)"', document.read_text())}
+    assert len(named) >= 100
+    missing = sorted(str(pair) for pair in named if not (REPO / pair[1]).is_dir())
+    assert not missing, missing
+
+
 def test_there_are_committed_results():
     """The globs below found something (a glob that found nothing would test nothing)."""
     assert TABLES or SWEEPS, f"no committed tables under {RESULTS}"
