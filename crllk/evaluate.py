@@ -13,7 +13,8 @@ Each run's checkpoint plays ``episodes`` seeded episodes (episode k in sub-envir
 k mod ``num_envs``, spawns from ``seed``, by default the run's evaluation seed, never a
 training seed) with its policy as trained: actions are sampled, from a torch generator seeded
 with the same seed, so the numbers are reproducible. ``deterministic=true`` plays the deployed
-policy instead, the one ``crllk.export`` writes: a continuous policy's mode, and a discrete
+policy instead, the one ``crllk.export`` writes: a continuous policy's expected action
+(:mod:`crllk.rl.expected_action`), and a discrete
 policy's expected wheel duties (its three duty pairs weighted by their probabilities,
 :mod:`crllk.rl.expected_duty`). The multipliers enforce the constraints on the sampled
 policy, the one PPO trains; the most probable of three discrete actions would be another
@@ -84,7 +85,7 @@ class EvaluateConfig:
     episodes: int = setting(100, check=at_most(MAX_EPISODES))
     deterministic: bool = False
     """The deployed policy instead of sampled actions: a discrete run's expected duties, a
-    continuous run's mode."""
+    continuous run's expected action."""
     seed: int | None = setting(None, check=spawn_seed)
     """Spawn and sampling seed (default: the run's ``eval.seed``, a validation seed; the test
     seed is refused, :mod:`crllk.protocol`)."""

@@ -26,7 +26,7 @@ TEST_EVALUATION = "test"
 """A run's test evaluation of its sampled policy: ``<run>/test.json``."""
 TEST_MODE_EVALUATION = "test-mode"
 """A run's test evaluation of its deployed policy (a discrete run's expected duties, a
-continuous run's mode): ``<run>/test-mode.json``."""
+continuous run's expected action): ``<run>/test-mode.json``."""
 
 
 def reserved_seed_problem(seed: int | None) -> str | None:

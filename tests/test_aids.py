@@ -53,7 +53,7 @@ def test_aids_runs_the_default_and_each_variant_on_its_maps():
                for c in commands)
 
 
-def test_teacher_runs_are_unchanged():
+def test_teacher_runs_are_pinned_on_obstacle_loop():
     specs = teacher_specs(Settings())
     assert len(specs) == 12
     pinned = ("encounter_curve_weight=1",)

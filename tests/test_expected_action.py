@@ -59,6 +59,13 @@ def test_a_continuous_actor_plays_its_expected_action_whatever_the_exploration()
     for exploration in (ExplorationType.RANDOM, ExplorationType.DETERMINISTIC):
         with set_exploration_type(exploration):
             assert torch.allclose(policy(td.clone())["action"], expected, atol=1e-6)
+    boxed = make_actor("state", (5,), "continuous", Bounded(0.0, 2.0, shape=(4, 2)),
+                       ModelConfig(encoder="mlp"))
+    params = boxed(td.clone())
+    with set_exploration_type(ExplorationType.DETERMINISTIC):
+        assert torch.allclose(expected_action_policy(boxed)(td.clone())["action"],
+                              1.0 + ExpectedAction()(params["loc"], params["scale"]),
+                              atol=1e-6)
     with pytest.raises(ValueError, match="Gaussian policy"):
         expected_action_policy(make_actor("state", (5,), "discrete", spec,
                                           ModelConfig(encoder="mlp")))

@@ -142,6 +142,9 @@ def test_deployed_label_names_what_the_evaluations_played():
     assert deployed_note([duties, mode]).endswith("a continuous agent's mode")
     assert "a continuous agent's expected action (the mean of its tanh-squashed" in \
         deployed_note([duties, action, None])
+    assert deployed_note([duties, action]).endswith("Gaussian's actions)")
+    assert deployed_note([action, mode]).endswith(
+        "or its mode in the evaluations that predate it")
     summary = {"J_R": 2.0, "J_clane": 0.1, "J_coll": 0.0, "episode_length": 512,
                "satisfied": True}
     documents = [{"source": {"run_dir": "a"}, "summary": summary,
@@ -362,16 +365,20 @@ def test_a_mode_evaluated_before_the_expected_forms_is_not_current(tiny_experime
 
     runs, _, _ = tiny_experiments
     settings = Settings(frames=16, episodes=2)
-    for agent, current_without in (("CRLLK-D", False), ("CRLLK-C", False)):
+    for agent in ("CRLLK-D", "CRLLK-C"):
         kept = tmp_path / agent
         shutil.copytree(runs / "small_loop" / f"{agent}-a0.5-seed0", kept)
         assert evaluation_is_current(kept, settings, MODE_EVALUATION, deterministic=True)
         path = kept / f"{MODE_EVALUATION}.json"
         document = json.loads(path.read_text())
-        del document["evaluation"]["deployed"]
-        path.write_text(json.dumps(document))
-        assert evaluation_is_current(kept, settings, MODE_EVALUATION,
-                                     deterministic=True) is current_without
+        for old in ("mode", None):  # said so, or said nothing
+            if old is None:
+                del document["evaluation"]["deployed"]
+            else:
+                document["evaluation"]["deployed"] = old
+            path.write_text(json.dumps(document))
+            assert not evaluation_is_current(kept, settings, MODE_EVALUATION,
+                                             deterministic=True)
 
 
 def test_a_run_trained_before_policy_files_gets_one_from_its_checkpoint(tiny_experiments,

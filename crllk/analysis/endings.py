@@ -170,7 +170,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--seconds", type=float, default=2.0)
     parser.add_argument("--deterministic", action="store_true",
                         help="play the deployed policy (discrete: expected duties; "
-                        "continuous: the mode)")
+                        "continuous: the expected action)")
     args = parser.parse_args(sys.argv[1:] if argv is None else argv)
     if not args.run_dir.is_dir():
         raise ConfigError(SOURCE, "run", f"no such run directory: {args.run_dir}")

@@ -4,7 +4,7 @@ The graph has one input, ``observation`` (uint8 ``[30, 40, 3]`` RGB for pixel ru
 40, 3 * history]`` with a frame history, float32 ``[F]`` state features for state runs), and one
 output, ``duty`` (float32 ``[2]``: left and right wheel duty cycles in [-1, 1]). What the pilot
 needs to feed it is in the model's metadata: ``crllk.observation``, ``crllk.action``,
-``crllk.deployed`` (``expected_duty`` or ``mode``: how the policy turns its action
+``crllk.deployed`` (``expected_duty`` or ``expected_action``: how the policy turns its action
 distribution into duties), ``crllk.observation_shape``, ``crllk.history`` (images and steps
 between them),
 ``crllk.supersample`` (how much larger training rendered each image before averaging it down),

@@ -36,6 +36,10 @@ class DeployedPolicy(nn.Module):
         self.network = network
         self.action = action
         self.expected_duty = ExpectedDuty()
+        space = actor.spec["action"].space if action != "discrete" else None
+        if space is not None and not (bool((space.low == -1).all()) and
+                                      bool((space.high == 1).all())):
+            raise ValueError(f"expected a Gaussian policy over [-1, 1]^2, got {space}")
         self.expected_action = ExpectedAction()
 
     def forward(self, observation: torch.Tensor) -> torch.Tensor:

@@ -21,7 +21,7 @@ train with the trainer's validation evaluations (``eval.csv``, ``eval.json``: sp
 1,000,000); each finished run is then evaluated once on the **test seed**
 (:mod:`crllk.protocol`, 400 episodes by default: ``test.json`` for the sampled policy,
 ``test-mode.json`` for the deployed one (a discrete run's expected duties, a continuous run's
-mode), where the policy is there;
+expected action), where the policy is there;
 :func:`crllk.evaluation.runs.evaluate_run`, as ``python -m crllk.evaluate``), and those test
 evaluations alone make the tables, which are
 written to ``results/<obs>/``: a Markdown table with the paper's numbers beside ours and the

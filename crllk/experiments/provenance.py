@@ -26,9 +26,11 @@ from crllk.yaml_files import read_yaml
 
 NOT_COMPARED = frozenset({
     "run_dir", "resume", "progress", "threads", "workers", "collector", "ray_address",
-    "checkpoint_every", "record_every", "viewer", "live", "live_port", "task_file", "eval"})
+    "checkpoint_every", "record_every", "viewer", "live", "live_port", "task_file", "eval",
+    "total_frames"})
 """Top-level settings that decide where and how a run is watched, not what it learns (the
-task itself is compared through ``task.*``)."""
+task itself is compared through ``task.*``), and its budget: a run trained for fewer frames
+than an experiment asks for is resumed to them (a longer run keeps its own schedules)."""
 FORMER_DEFAULTS: Mapping[str, Any] = {"encounter_curve_weight": 1.0}
 """Settings added since with a value that changed what runs learn: a run without the setting
 in its ``config.yaml`` trained as this value."""

@@ -65,7 +65,7 @@ SWEEP_COLLISION_WEIGHTS = (1.0, 4.0, 16.0, 64.0)
 MODE_EVALUATION = TEST_MODE_EVALUATION
 """Each run's test evaluation of its deployed policy (``<run>/test-mode.json``), the one
 ``crllk.export`` writes for the robot: a discrete run's expected duties, a continuous run's
-mode (:func:`crllk.training.runs.deployed_form`)."""
+expected action (:func:`crllk.training.runs.deployed_form`)."""
 
 
 @dataclass(frozen=True)
@@ -181,9 +181,13 @@ def deployed_label(entries: Iterable[Mapping[str, Any] | None]) -> str:
 
 def deployed_note(entries: Iterable[Mapping[str, Any] | None]) -> str:
     """What a table's *deployed policy* is, once its discrete agents deploy expected duties:
-    a continuous agent's expected action where its evaluations played it, else its mode."""
+    a continuous agent's expected action where its evaluations played it, else its mode (both,
+    where some evaluations predate the expected action)."""
+    forms = _forms(entries)
     gaussian = ("expected action (the mean of its tanh-squashed Gaussian's actions)"
-                if EXPECTED_ACTION in _forms(entries) else "mode")
+                if EXPECTED_ACTION in forms else "mode")
+    if EXPECTED_ACTION in forms and MODE in forms:
+        gaussian += ", or its mode in the evaluations that predate it"
     return ("the policy `crllk.export` writes for the robot: a discrete agent's expected "
             "wheel duties (its three duty pairs weighted by their probabilities), a "
             f"continuous agent's {gaussian}")
@@ -284,8 +288,8 @@ def run_overrides(spec: RunSpec, settings: Settings) -> list[str]:
 
 
 def check_provenance(specs: Sequence[RunSpec], settings: Settings) -> None:
-    """Refuses to reuse a finished run trained with other settings than its experiment
-    trains now (:func:`crllk.experiments.provenance.stale_settings`).
+    """Refuses to reuse or resume a run (finished or not) trained with other settings than
+    its experiment trains now (:func:`crllk.experiments.provenance.stale_settings`).
 
     Raises:
         ConfigError: one line naming each such run and its settings.

@@ -163,8 +163,8 @@ def record_episodes(env: BatchedLaneKeepingEnv, policy: Policy, episodes: int,
         policy: writes ``"action"`` into the tensordict it is given.
         episodes: episodes of sub-environment 0 to play and log.
         path: the ``.rrd`` file to write (its directory is created); None: viewer only.
-        deterministic: take the policy's mode instead of sampling (a discrete run's
-            deployed policy in a duty env never samples: its expected duties).
+        deterministic: take the policy's deterministic action instead of sampling (a run's
+            deployed policy, its expected duties or expected action, never samples).
         viewer: ``"none"`` (file only), ``"spawn"`` (start or reuse a native viewer on
             127.0.0.1:``VIEWER_PORT``) or ``"serve"`` (a gRPC server on 127.0.0.1 for
             ``rerun --bind 127.0.0.1 --connect``, alive while recording).

@@ -31,9 +31,11 @@ class ExpectedAction(nn.Module):
     def __init__(self, low: torch.Tensor | float = -1.0, high: torch.Tensor | float = 1.0,
                  points: int = GRID_POINTS):
         super().__init__()
-        points = np.linspace(-GRID_HALF_WIDTH, GRID_HALF_WIDTH, points)
-        weights = np.exp(-0.5 * points**2)
-        self.register_buffer("points", torch.tensor(points, dtype=torch.float64))
+        grid = np.linspace(-GRID_HALF_WIDTH, GRID_HALF_WIDTH, points)
+        weights = np.exp(-0.5 * grid**2)
+        # the grid in double precision (cast to the input's dtype): float32 inputs get the
+        # float32 rounding of exact weights
+        self.register_buffer("points", torch.tensor(grid, dtype=torch.float64))
         self.register_buffer("weights", torch.tensor(weights / weights.sum(), dtype=torch.float64))
         self.register_buffer("low", torch.as_tensor(low, dtype=torch.float32))
         self.register_buffer("high", torch.as_tensor(high, dtype=torch.float32))
