@@ -249,7 +249,7 @@ def test_the_obstacle_loop_figures_are_the_test_evaluations():
         assert (f"the sampled CRLLK-D gives {sampled}, against {ppo[0]:.3f} and {ppo[1]:.3f} for "
                 "the original's fixed weights") in text
         assert f"{hits} of the CRLLK runs' {total} test collisions are with one duckie" in text
-        assert f"every run deviates {spread}, over α1" in text
+        assert f"every CRLLK run deviates {spread}, over α1" in text
     assert all(j <= 0.02 for j in crllk) and all(j > 0.02 for j in ppo)
     assert f"{hits} of the {total} collisions of the CRLLK runs' test episodes" in camera
     assert (f"The sampled CRLLK-D gives {sampled} on seeds 0, 1 and 2 (its learned λ_coll ended "
@@ -303,9 +303,9 @@ def test_the_obstacle_loop_figures_are_the_test_evaluations():
              for n in ("test", "test-mode")]
     assert first[0]["evaluation"]["seed"] == first[1]["evaluation"]["seed"] == TEST_SEED
     assert "deployed" not in first[1]["evaluation"]  # the argmax
-    assert (f"the first gave J_coll {first[0]['summary']['J_coll']:.3f} sampled and "
+    assert (f"the first training gave J_coll {first[0]['summary']['J_coll']:.3f} sampled and "
             f"{first[1]['summary']['J_coll']:.3f} from its most probable action, the second "
-            f"{again[0]:.3f} and {again[1]:.3f}") in camera
+            f"(`CRLLK-D-curve1-a0.5-seed2`) {again[0]:.3f} and {again[1]:.3f}") in camera
     for task, run in (("zigzag", "CRLLK-D-a0.5-seed2"), ("obstacle_loop",
                                                          "CRLLK-D-curve1-a0.5-seed2")):
         old_config = (replaced / task / "CRLLK-D-a0.5-seed2" / "config.yaml").read_text()
