@@ -258,8 +258,9 @@ class TrainConfig:
     encounter_curve_weight: float = setting(1.0, check=positive)
     """How much likelier such an episode starts before an obstacle on a lane that turns than
     before one on a straight lane (1: the task's own ``spawn.encounter_curve_weight``, by
-    default every blocking obstacle alike). The ``action`` group sets it: 4 for ``discrete``,
-    1 for the Gaussian actions (``crllk/conf/action``, chosen in ``docs/findings.md``)."""
+    default every blocking obstacle alike). ``action=discrete`` sets 4
+    (``crllk/conf/action/discrete.yaml``, chosen in ``docs/findings.md``); the Gaussian
+    actions keep 1."""
     threads: int = setting(1, check=positive)
     """Torch CPU threads for the networks (the simulations use one core)."""
     checkpoint_every: int = setting(10, check=positive)

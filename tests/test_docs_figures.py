@@ -98,17 +98,19 @@ def test_every_time_range_is_an_experiment_s_or_known():
 def test_the_evaluation_page_s_sampled_and_mode_figures_are_the_runs():
     """The validation evaluations of CRLLK-D on obstacle_loop, sampled and from its most
     probable action (``eval-mode.json``, written when that was the deployed policy)."""
-    root = REPO / "results/runs/pixels/obstacle_loop"
-    sampled, mode = ([json.loads((root / f"CRLLK-D-a0.5-seed{s}" / f"{name}.json").read_text())
-                      ["summary"] for s in (0, 1)] for name in ("eval", "eval-mode"))
+    root = REPO / "results/runs/pixels/obstacle_loop"  # the former default's runs
+    sampled, mode = ([json.loads((root / f"CRLLK-D-curve1-a0.5-seed{s}" / f"{name}.json")
+                                 .read_text())["summary"] for s in (0, 1)]
+                     for name in ("eval", "eval-mode"))
     text = prose("evaluation.md")
     assert (f"gave J_coll {sampled[0]['J_coll']:.2f} / {sampled[1]['J_coll']:.2f} sampled "
             f"and {mode[0]['J_coll']:.2f} / {mode[1]['J_coll']:.2f} from its most probable "
             f"action (seeds 0 / 1), with J_clane {sampled[0]['J_clane']:.3f} / "
             f"{sampled[1]['J_clane']:.3f} dm sampled and {mode[0]['J_clane']:.3f} / "
             f"{mode[1]['J_clane']:.3f} dm from it") in text
-    assert not any("deployed" in json.loads((root / f"CRLLK-D-a0.5-seed{s}" / "eval-mode.json")
-                                            .read_text())["evaluation"] for s in (0, 1))
+    assert not any("deployed" in json.loads((root / f"CRLLK-D-curve1-a0.5-seed{s}" /
+                                             "eval-mode.json").read_text())["evaluation"]
+                   for s in (0, 1))
     assert all(m["J_coll"] <= s["J_coll"] and m["J_clane"] > s["J_clane"]
                for s, m in zip(sampled, mode, strict=True))
 

@@ -83,7 +83,7 @@ def test_group_files_set_only_what_differs_from_the_schema(group_file):
     restates a default of :class:`TrainConfig`."""
     data = OmegaConf.to_container(OmegaConf.load(CONF_DIR / group_file))
     group = group_file.split("/")[0]
-    prefix = [] if group == "obs" else [group]  # obs files are global packages
+    prefix = [] if group in ("obs", "action") else [group]  # global packages
     data.pop("defaults", None)  # agent files only choose groups
     for path, value in _leaves(data):
         default = _schema_default([*prefix, *path])
