@@ -757,7 +757,8 @@ def test_the_crllk_c_noise_and_no_bonus_rows_are_the_runs():
             f"direction, whose lane it does not block, and {len(endings) - curve - cone} times "
             "elsewhere") in text
     scales = [_steering_scale(p.parent) for p in (REPO / "results/runs/pixels").glob(
-        "*/*-C-*/policy.pt")]
+        "*/*-C-*/policy.pt") if "max_log_std: null" in (p.parent / "config.yaml").read_text()
+        or "max_log_std" not in (p.parent / "config.yaml").read_text()]
     assert len(scales) >= 20
     assert f"from 0.61 at the start to {min(scales):.2f}–{max(scales):.2f} in every kept" in text
     starts = {float(line.split(":")[1]) for p in (REPO / "results/runs/pixels").glob(
@@ -808,3 +809,47 @@ def test_the_expected_action_rows_are_their_validation_evaluations():
         reverse = [d["breakdown"]["by_direction"]["reverse"]["J_clane"]
                    for d in (sampled, mode, deployed)]
         assert reverse[2] < min(reverse[:2])
+
+
+NOISE_BOUND_RUNS = (("default, seed 0", "CRLLK-C-a0.5-seed0", "eval-400"),
+                    ("default, seed 1", "CRLLK-C-a0.5-seed1", "eval-400"),
+                    ("`model.max_log_std=-0.5`, seed 0", "CRLLK-C-maxstd-a0.5-seed0", "val400"),
+                    ("`model.max_log_std=-0.5`, seed 1", "CRLLK-C-maxstd-a0.5-seed1", "val400"))
+"""The noise-bound trial's rows: label, run directory and its sampled 400-episode evaluation."""
+
+
+def test_the_noise_bound_rows_are_their_validation_evaluations():
+    """The noise-bound trial: sampled and expected-action evaluations (validation seed, 400
+    episodes), the training collisions of iterations 400–489 and the final λ_coll; the prose's
+    counts and the bound in the runs' configurations."""
+    import csv
+
+    root = REPO / "results/runs/pixels/obstacle_loop"
+    text = " ".join(FINDINGS.split())
+    ends, curve = {}, 0
+    for label, run, sampled_name in NOISE_BOUND_RUNS:
+        sampled, deployed = (json.loads((root / run / f"{n}.json").read_text())
+                             for n in (sampled_name, "val400-deployed"))
+        for document in (sampled, deployed):
+            assert document["evaluation"]["seed"] == 1_000_000
+            assert document["evaluation"]["episodes"] == 400
+        assert deployed["evaluation"]["deployed"] == "expected_action"
+        assert sampled["evaluation"]["deterministic"] is False
+        with (root / run / "metrics.csv").open() as handle:
+            rows = list(csv.DictReader(handle))
+        late = [float(r["J_coll"]) for r in rows
+                if 400 <= int(r["iteration"]) <= 489 and r["J_coll"] not in ("", "nan")]
+        multiplier = float(rows[-1]["lambda_collision"])
+        assert (f"| {label} | {_val400_cell(sampled)} | {_val400_cell(deployed)} | "
+                f"{sum(late) / len(late):.3f} | {multiplier:.1f} |") in FINDINGS
+        bounded = "maxstd" in run
+        ends.setdefault(bounded, []).append((_endings(sampled), _endings(deployed)))
+        if bounded:
+            assert "max_log_std: -0.5" in (root / run / "config.yaml").read_text()
+            curve += deployed["breakdown"]["collisions_by_object"].get(
+                "3 duckie (0.88, 0.88)", 0)
+    bounded, default = ([sum(e[k] for e in ends[b]) for k in (0, 1)] for b in (True, False))
+    assert (f"{bounded[0]} of its 800 sampled validation episodes ended on an obstacle or off "
+            f"the road, against {default[0]} for the default, and its expected action "
+            f"{bounded[1]}, against {default[1]}") in text
+    assert f"hit the curve duckie {curve} times" in text

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import pytest
 import torch
 from tensordict import TensorDict
@@ -45,6 +47,25 @@ def test_continuous_actor_stays_in_bounds_and_starts_with_the_configured_spread(
     actor(td)
     assert td["action"].abs().max() <= 1.0
     assert torch.allclose(td["scale"], torch.full_like(td["scale"], torch.exp(torch.tensor(-1.0))))
+
+
+def test_continuous_actor_spread_is_held_at_its_bound_which_then_gets_no_gradient():
+    spec = Bounded(-1.0, 1.0, shape=(2,))
+    actor = make_actor("state", (4,), "continuous", spec,
+                       ModelConfig(initial_log_std=-0.5, max_log_std=-0.7))
+    params = actor.module[0].module
+    with torch.no_grad():
+        params.log_std.copy_(torch.tensor([-0.9, 0.3]))  # one below the bound, one above
+    td = TensorDict({"state": torch.randn(8, 4)}, batch_size=[8])
+    actor(td)
+    assert td["scale"][0].tolist() == pytest.approx([math.exp(-0.9), math.exp(-0.7)])
+    td["scale"].sum().backward()
+    assert params.log_std.grad[0] > 0 and params.log_std.grad[1] == 0
+    unbounded = make_actor("state", (4,), "continuous", spec, ModelConfig())
+    with torch.no_grad():
+        unbounded.module[0].module.log_std.fill_(0.3)
+    unbounded(td)
+    assert td["scale"].max().item() == pytest.approx(math.exp(0.3))
 
 
 def test_state_features_are_scaled_by_name():

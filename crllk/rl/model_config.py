@@ -18,6 +18,9 @@ class ModelConfig:
         feature_dim: width of the pixel encoder's output layer.
         initial_log_std: log standard deviation of the continuous actor's first actions
             (before the tanh squashing).
+        max_log_std: the most that log standard deviation may be (None: no bound); the learned
+            parameter is clamped to it where the actor is evaluated, so above it the parameter
+            gets no gradient and stays there.
         shared_critic: one encoder with a value head for the reward and each cost, instead
             of one network per critic.
         critic_input: what the critics read: ``"observation"`` (the policy's input) or
@@ -31,6 +34,7 @@ class ModelConfig:
     hidden: int = setting(64, check=positive)
     feature_dim: int = setting(256, check=positive)
     initial_log_std: float = -0.5
+    max_log_std: float | None = None
     shared_critic: bool = False
     critic_input: str = setting("observation", check=one_of("observation", "state"))
     policy_commands: bool = False

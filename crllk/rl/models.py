@@ -164,16 +164,21 @@ def _head(in_dim: int, out_dim: int, *, gain: float) -> nn.Linear:
 
 
 class GaussianParams(nn.Module):
-    """Action means from a head, with a learned state-independent log standard deviation."""
+    """Action means from a head, with a learned state-independent log standard deviation,
+    at most ``max_log_std`` when one is given (above it the parameter gets no gradient)."""
 
-    def __init__(self, body: nn.Module, action_dim: int, initial_log_std: float):
+    def __init__(self, body: nn.Module, action_dim: int, initial_log_std: float,
+                 max_log_std: float | None = None):
         super().__init__()
         self.body = body
         self.log_std = nn.Parameter(torch.full((action_dim,), float(initial_log_std)))
+        self.max_log_std = max_log_std
 
     def forward(self, *inputs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         loc = self.body(*inputs)
-        return loc, self.log_std.exp().expand_as(loc)
+        log_std = (self.log_std if self.max_log_std is None
+                   else self.log_std.clamp(max=self.max_log_std))
+        return loc, log_std.exp().expand_as(loc)
 
 
 COMMANDS_SCALE = 0.5
@@ -226,7 +231,8 @@ def make_actor(observation: str, observation_shape: Sequence[int], action: str,
     if action not in GAUSSIAN_ACTIONS:
         raise ValueError(f"action must be one of {', '.join(POLICY_ACTIONS)}, got {action!r}")
     action_dim = int(action_spec.shape[-1])
-    net = GaussianParams(body(action_dim), action_dim, config.initial_log_std)
+    net = GaussianParams(body(action_dim), action_dim, config.initial_log_std,
+                         config.max_log_std)
     module = TensorDictModule(net, in_keys=in_keys, out_keys=["loc", "scale"])
     low, high = action_spec.space.low, action_spec.space.high
     return ProbabilisticActor(module, in_keys=["loc", "scale"], spec=action_spec,
