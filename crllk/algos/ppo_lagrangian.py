@@ -101,9 +101,12 @@ class PPOLagrangian:
         ppo = self.config.ppo
         self.advantages(batch)
         self.combination(batch)
-        flat = batch.reshape(-1)
+        # only what the loss reads is indexed per minibatch (not the next observations)
+        flat = batch.select(*self.loss.in_keys, self.loss.tensor_keys.teacher_action,
+                            strict=False).reshape(-1)
         keys = self.loss.out_keys
-        size, sums, count = flat.shape[0], dict.fromkeys(keys, 0.0), 0
+        size, count = flat.shape[0], 0
+        sums = torch.zeros(len(keys), dtype=torch.float64)
         for _ in range(ppo.epochs):
             order = torch.randperm(size, generator=generator)
             for start in range(0, size, ppo.minibatch_size):
@@ -112,12 +115,11 @@ class PPOLagrangian:
                 self.optimizer.zero_grad(set_to_none=True)
                 total.backward()
                 for group in self._gradient_groups:
-                    torch.nn.utils.clip_grad_norm_(group, ppo.max_grad_norm)
+                    torch.nn.utils.clip_grad_norm_(group, ppo.max_grad_norm, foreach=True)
                 self.optimizer.step()
-                for key in keys:
-                    sums[key] += out[key].item()
+                sums += torch.stack([out[key].detach() for key in keys]).to(torch.float64)
                 count += 1
-        return {key: value / count for key, value in sums.items()}
+        return {key: value / count for key, value in zip(keys, sums.tolist(), strict=True)}
 
     def state_dict(self) -> dict[str, Any]:
         return {"actor": self.actor.state_dict(),
