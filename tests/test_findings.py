@@ -288,9 +288,37 @@ def test_the_obstacle_loop_figures_are_the_test_evaluations():
     c_sampled = [_test_document("obstacle_loop", "CRLLK-C", s)["summary"]["J_coll"]
                  for s in (0, 1, 2)]
     c_mode = [_test_document("obstacle_loop", "CRLLK-C", s, "test-mode") for s in (0, 1, 2)]
-    assert all("deployed" not in d["evaluation"] for d in c_mode)  # tanh of the mean
+    assert all(d["evaluation"]["deployed"] == "expected_action" for d in c_mode)
     assert [k for k, j in enumerate(c_sampled) if j > 0.02] == [0, 2]
-    assert [k for k, d in enumerate(c_mode) if d["summary"]["J_coll"] > 0.02] == [1, 2]
+    assert [k for k, d in enumerate(c_mode) if d["summary"]["J_coll"] > 0.02] == [2]
+    assert [k for k, d in enumerate(c_mode) if upper(d) <= 0.02] == [1]
+    c_deployed = [d["summary"]["J_coll"] for d in c_mode]
+    for text in (readme, home):
+        assert (f"sampled policy misses α2 on seeds 0 and 2 (J_coll {c_sampled[0]:.3f}, "
+                f"{c_sampled[1]:.3f}, {c_sampled[2]:.3f})") in text
+        assert (f"holds on seeds 0 and 1 (J_coll {c_deployed[0]:.3f} and {c_deployed[1]:.3f}) "
+                f"but not on seed 2 ({c_deployed[2]:.3f})") in text
+    assert (f"CRLLK-C misses α2 sampled on seeds 0 and 2 (J_coll {c_sampled[0]:.3f}, "
+            f"{c_sampled[1]:.3f} and {c_sampled[2]:.3f}); its deployed policy, its expected "
+            f"action, holds both constraints on seeds 0 and 1 (J_coll {c_deployed[0]:.3f} and "
+            f"{c_deployed[1]:.3f}, at the 95 % upper bound on seed 1) and misses on seed 2 "
+            f"({c_deployed[2]:.3f})") in camera
+    c_lambdas = [d["source"]["multipliers"]["collision"] for d in c_mode]
+    first_c2 = REPO / "results/runs/pixels/replaced/obstacle_loop/CRLLK-C-a0.5-seed2"
+    trainings = [REPO / "results/runs/pixels/obstacle_loop/CRLLK-C-a0.5-seed2", first_c2]
+    late = [_late_collisions(run) for run in trainings]
+    ended = [_final_multiplier(run) for run in trainings]
+    assert f"{ended[0]:.1f}" == f"{c_lambdas[2]:.1f}"
+    assert (f"it ended with λ_coll {ended[0]:.1f} and {ended[1]:.1f} and its training episodes "
+            f"still colliding {late[0]:.3f} and {late[1]:.3f} per episode") in readme
+    assert (f"its learned λ_coll ended at {c_lambdas[2]:.1f}, against {c_lambdas[0]:.1f} and "
+            f"{c_lambdas[1]:.1f} for seeds 0 and 1, and its training episodes still collided "
+            f"{late[0]:.3f} per episode over its last 100 iterations") in camera
+    first = [json.loads((first_c2 / f"{n}.json").read_text()) for n in ("test", "test-mode")]
+    assert "deployed" not in first[1]["evaluation"]  # tanh of the mean
+    assert (f"(λ_coll {ended[1]:.1f}, {late[1]:.3f} per episode; J_coll "
+            f"{first[0]['summary']['J_coll']:.3f} sampled and "
+            f"{first[1]['summary']['J_coll']:.3f} as tanh of its mean") in camera
     former = [json.loads((REPO / f"results/runs/pixels/obstacle_loop/CRLLK-D-curve1-a0.5-seed{s}/"
                           "test.json").read_text())["summary"]["J_coll"] for s in (0, 1, 2)]
     assert (f"the former default's runs (`CRLLK-D-curve1-a0.5-seed<S>`) gave J_coll "
@@ -318,6 +346,24 @@ def test_the_obstacle_loop_figures_are_the_test_evaluations():
     assert teacher["breakdown"]["by_direction"]["intended"]["J_clane"] >= min(intended)
 
 
+def _late_collisions(run: Path) -> float:
+    """Mean training J_coll of a 500k-frame run's last 100 iterations (400–499), per row."""
+    import csv
+
+    with (run / "metrics.csv").open() as handle:
+        late = [float(r["J_coll"]) for r in csv.DictReader(handle)
+                if int(r["iteration"]) >= 400 and r["J_coll"] not in ("", "nan")]
+    return sum(late) / len(late)
+
+
+def _final_multiplier(run: Path) -> float:
+    """λ_coll as a run's training ended."""
+    import csv
+
+    with (run / "metrics.csv").open() as handle:
+        return float(list(csv.DictReader(handle))[-1]["lambda_collision"])
+
+
 def _seeds_text(seeds: list[int]) -> str:
     """``seeds 0, 1 and 2``, ``seed 1``, or ``no seed``, as the results page says it."""
     if not seeds:
@@ -339,18 +385,34 @@ def _misses(task: str, agents: dict[str, tuple[int, ...]], name: str) -> list[tu
 
 
 def test_the_maps_without_obstacles_are_the_test_evaluations():
-    """"every seed" on small_loop; on zigzag one sampled miss, J_coll 0.03, as the prose
-    names it, and no deployed one; the fixed weights' one miss."""
-    for name in ("test", "test-mode"):
-        assert _misses("small_loop", CRLLK_SEEDS, name) == []
-    assert _misses("zigzag", CRLLK_SEEDS, "test") == [("CRLLK-C", 2, "0.03")]
-    assert _misses("zigzag", CRLLK_SEEDS, "test-mode") == []
+    """"every seed" on small_loop and zigzag, sampled and deployed (expected duties and
+    expected actions), and the one sampled policy that holds only on its point estimate, as
+    the prose names it; the fixed weights' one miss."""
+    from crllk.evaluation.intervals import wilson_interval
+
+    above = []
+    for task in ("small_loop", "zigzag"):
+        for name in ("test", "test-mode"):
+            assert _misses(task, CRLLK_SEEDS, name) == []
+            for agent, seeds in CRLLK_SEEDS.items():
+                for seed in seeds:
+                    document = _test_document(task, agent, seed, name)
+                    if name == "test-mode":
+                        assert document["evaluation"]["deployed"].startswith("expected_")
+                    hits = sum(e["cost_collision"] > 0 for e in document["episodes"])
+                    bound = wilson_interval(hits, len(document["episodes"]))[1]
+                    if bound > 0.02:
+                        above.append((task, agent, seed, name, document["summary"]["J_coll"],
+                                      bound))
+    assert len(above) == 1 and above[0][:4] == ("zigzag", "CRLLK-C", 0, "test")
     baselines = {"PPO-D": (0, 1), "PPO-C": (0, 1)}
     assert [m for task in ("small_loop", "zigzag") for m in _misses(task, baselines, "test")] \
         == [("PPO-C", 1, "0.03")]
     camera = prose("results/camera.md")
-    assert "the miss is J_coll 0.03 (zigzag: CRLLK-C seed 2 sampled)" in camera
-    assert "all runs but one sampled policy (CRLLK-C seed 2, J_coll 0.03)" in prose("index.md")
+    assert (f"but one sampled policy (zigzag: CRLLK-C seed 0, J_coll {above[0][4]:.3f}, upper "
+            f"bound {above[0][5]:.3f})") in camera
+    assert ("on `small_loop` and `zigzag` on every seed, their sampled policies and their "
+            "deployed ones") in prose("index.md")
     assert "one run (zigzag, PPO-C seed 1 sampled, J_coll 0.03)" in camera
 
 COST_DISCOUNT_RUNS = (("default, seed 0", "CRLLK-D-curve1-a0.5-seed0"),
