@@ -117,7 +117,7 @@ class PPOLagrangian:
                 for group in self._gradient_groups:
                     torch.nn.utils.clip_grad_norm_(group, ppo.max_grad_norm, foreach=True)
                 self.optimizer.step()
-                sums += torch.stack([out[key].detach() for key in keys]).to(torch.float64)
+                sums += torch.stack([out[key].detach() for key in keys]).to("cpu", torch.float64)
                 count += 1
         return {key: value / count for key, value in zip(keys, sums.tolist(), strict=True)}
 
