@@ -934,3 +934,22 @@ def test_the_noise_bound_rows_are_their_validation_evaluations():
             f"the road, against {default[0]} for the default, and its expected action "
             f"{bounded[1]}, against {default[1]}") in text
     assert f"hit the curve duckie {curve} times" in text
+
+
+def test_the_real_map_page_quotes_the_retrained_and_the_replaced_runs():
+    """The real-maps page's prose: regress_4way_adam's test J_coll of the runs trained again
+    and of the replaced ones, sampled and deployed, from their test evaluations."""
+    runs = REPO / "results/runs/pixels"
+
+    def j_coll(where: str, seed: int, name: str) -> str:
+        path = runs / where / f"CRLLK-D-a0.5-seed{seed}" / f"{name}.json"
+        return f"{json.loads(path.read_text())['summary']['J_coll']:.3f}"
+
+    def pair(where: str, name: str) -> str:
+        return f"{j_coll(where, 0, name)} and {j_coll(where, 1, name)}"
+
+    text = prose("results/realmaps.md")
+    new, old = "regress_4way_adam", "replaced/regress_4way_adam"
+    assert f"sampled (J_coll {pair(new, 'test')}, against {pair(old, 'test')} before)" in text
+    assert (f"deployed ({pair(new, 'test-mode')}, against the former mode's "
+            f"{pair(old, 'test-mode')})") in text
