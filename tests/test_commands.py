@@ -98,7 +98,8 @@ def test_bench_batched_and_training_figures(capsys, tmp_path):
     printed = capsys.readouterr().out
     assert "make_env state, num_envs=2" in printed and "make_env pixels, num_envs=2" in printed
     assert "training, state (frames/s)" in printed and "training, pixels (frames/s)" in printed
-    assert printed.count("met") + printed.count("MISSED") == 8
+    assert "training, state, collect_ahead (frames/s)" in printed
+    assert printed.count("met") + printed.count("MISSED") == 9
     assert f"{run}: 12 s (0.2 min) at 200 frames" in printed
 
 

@@ -14,6 +14,7 @@ from docs_pages import page, prose
 REPO = Path(__file__).resolve().parents[1]
 WALL_TIME = REPO / "results/runs/pixels/obstacle_loop/default-command-alone/wall-time.txt"
 ROUNDS = REPO / "results/bench/pixel-speed-alternating.txt"
+AHEAD_ROUNDS = REPO / "results/bench/collect-ahead-alternating.txt"
 
 
 def _minutes(text: str) -> list[float]:
@@ -56,6 +57,65 @@ def test_the_training_rows_are_the_committed_rounds(row):
              ", ".join(f"{x:.0f}" for x in rounds["main"]),
              ", ".join(f"{r:.2f}" for r in ratios), f"{statistics.median(ratios):.2f}")
     assert f"| {row} | " + " | ".join(cells) + " |" in page("benchmarks.md")
+
+
+def _rounds(path: Path, row: str) -> dict[str, list[float]]:
+    rounds: dict[str, list[float]] = {"base": [], "main": []}
+    who = None
+    for line in path.read_text().splitlines():
+        if line.startswith("== round"):
+            who = line.split()[3]
+        elif line.startswith(row + " "):
+            rounds[who].append(float(line[len(row):].split()[0]))
+    return rounds
+
+
+@pytest.mark.parametrize(("row", "base_row"), [
+    ("training, state (frames/s)", "training, state (frames/s)"),
+    ("training, state, collect_ahead (frames/s)", "training, state (frames/s)"),
+    ("training, pixels (frames/s)", "training, pixels (frames/s)")])
+def test_the_collect_ahead_rows_are_the_committed_rounds(row, base_row):
+    """The collecting-ahead table: each round's figure of the current code against the same
+    round's figure of 864796d (which cannot collect ahead: its sequential state figure)."""
+    base, main = _rounds(AHEAD_ROUNDS, base_row)["base"], _rounds(AHEAD_ROUNDS, row)["main"]
+    assert len(base) == len(main) == 3
+    ratios = [m / b for b, m in zip(base, main, strict=True)]
+    cells = (", ".join(f"{x:.0f}" for x in base), ", ".join(f"{x:.0f}" for x in main),
+             ", ".join(f"{r:.2f}" for r in ratios), f"{statistics.median(ratios):.2f}")
+    assert f"| {row} | " + " | ".join(cells) + " |" in page("benchmarks.md")
+
+
+def test_the_collect_ahead_prose_is_the_committed_measurements():
+    """The medians and ranges the collecting-ahead prose quotes."""
+    text = prose("benchmarks.md")
+
+    def median_ratio(row: str) -> float:
+        base = _rounds(AHEAD_ROUNDS, "training, state (frames/s)")["base"]
+        main = _rounds(AHEAD_ROUNDS, row)["main"]
+        return statistics.median(m / b for b, m in zip(base, main, strict=True))
+
+    ahead, default = (median_ratio("training, state, collect_ahead (frames/s)"),
+                      median_ratio("training, state (frames/s)"))
+    assert f"collecting ahead is {ahead:.1f}x the commit before this work, where the default " \
+           f"is {default:.1f}x" in text
+    bound = [float(line.split()[-3]) for line in AHEAD_ROUNDS.read_text().splitlines()
+             if line.startswith("training, state, collect_ahead")]
+    assert f"collecting ahead: {min(bound):.2f}–{max(bound):.2f}, still under 0.5" in text
+    pixels: dict[str, list[float]] = {}
+    for line in (REPO / "results/bench/collect-ahead-pixels.txt").read_text().splitlines():
+        if not line.startswith("#"):
+            settings, rate = line.split("]")[0].split("[")[1], float(line.split("]")[1].split()[0])
+            pixels.setdefault(settings, []).append(rate)
+    plain = pixels["'collect_ahead=false'"]
+
+    def spread(key: str) -> str:
+        low, high = (f"{min(r / p for r, p in zip(pixels[key], plain, strict=True)):.2f}",
+                     f"{max(r / p for r, p in zip(pixels[key], plain, strict=True)):.2f}")
+        return low if low == high else f"{low}–{high}"
+
+    two, one = spread("'collect_ahead=true'"), spread("'collect_ahead=true', 'threads=1'")
+    assert f"{two}x of the sequential loop with the update on two threads" in text
+    assert f"and {one}x with it on one" in text
 
 
 def test_the_default_command_s_training_time_is_the_committed_one():

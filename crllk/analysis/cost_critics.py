@@ -34,9 +34,9 @@ def cost_critic_fit(run_dir: Path, batches: int, constraint: str) -> dict[str, A
     from crllk.algos.ppo_lagrangian import PPOLagrangian
     from crllk.envs.episodes import EpisodeAccumulator
     from crllk.rl.loss import explained_variance
+    from crllk.training.batches import collect_batch, first_carry
     from crllk.training.build import build_run
     from crllk.training.checkpoints import load_checkpoint, restore
-    from crllk.training.loop import collect_batch, first_carry
     from crllk.training.runs import CHECKPOINT_FILE, load_run_config
     from crllk.training.updates import shape_signals
 

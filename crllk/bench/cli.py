@@ -126,9 +126,10 @@ def main(argv: Sequence[str] | None = None) -> None:
 
         for config in training_configs:
             observation = config.obs.name
+            ahead = ", collect_ahead" if config.collect_ahead else ""
             rates = training_rates(config, iterations=args.iterations)
             print_row(f"env only, {observation}, num_envs={config.num_envs}", rates.environment)
-            print_row(f"training, {observation} (frames/s)", rates.training,
+            print_row(f"training, {observation}{ahead} (frames/s)", rates.training,
                        rates.environment, 0.5)
     if worker_configs:
         print_worker_figures(worker_configs, args.iterations)
@@ -140,8 +141,9 @@ def main(argv: Sequence[str] | None = None) -> None:
 
 
 def training_bench_configs(task: str, overrides: Sequence[str]) -> list[TrainConfig]:
-    """The trainer configurations of the ``--training`` figures, state then pixels (checked
-    before anything is measured).
+    """The trainer configurations of the ``--training`` figures, state, state collecting
+    ahead (``collect_ahead=true``, unless the overrides decide it or leave no workers) and
+    pixels (checked before anything is measured).
 
     Raises:
         ConfigError: if an override is bad, or asks for remote collectors (these figures step
@@ -149,12 +151,16 @@ def training_bench_configs(task: str, overrides: Sequence[str]) -> list[TrainCon
     """
     from crllk.bench.training import bench_config
 
-    configs = [bench_config([f"task={task}", f"obs={observation}", *overrides])
-               for observation in ("state", "pixels")]
-    if configs[0].collector != "local":
+    state = bench_config([f"task={task}", "obs=state", *overrides])
+    if state.collector != "local":
         raise ConfigError("--overrides", "collector", "--training times local collection; time "
                           "collector=ray with --workers")
-    return configs
+    settings = [["obs=pixels"]]
+    decided = any(o.split("=", 1)[0].lstrip("+") == "collect_ahead" for o in overrides)
+    if not decided and state.workers >= 2:
+        settings.insert(0, ["obs=state", "collect_ahead=true"])
+    return [state, *(bench_config([f"task={task}", *setting, *overrides])
+                     for setting in settings)]
 
 
 def randomization_part(part: str) -> dict[str, Any]:

@@ -30,7 +30,7 @@ from crllk.recording.live import LiveView, live_url, server_sink
 from crllk.recording.recorder import record_episodes
 from crllk.recording.viewer import free_port, start_viewer, stop_viewer
 from crllk.training.build import Learner, build_env, build_run
-from crllk.training.loop import episode_columns, learn
+from crllk.training.loop import batch_source, episode_columns, learn
 
 _TARGET = 0.05
 """The live view may cost at most this share of training frames/s."""
@@ -62,16 +62,16 @@ def live_cost(config: TrainConfig, iterations: int, repetitions: int, viewer: bo
     """Alternating off/on blocks of ``iterations`` iterations, ``repetitions`` of each."""
     env, learner, multipliers, generator = build_run(config)
     episodes = EpisodeAccumulator(config.num_envs, env.constraints)
-    carry = env.reset()
+    batches = batch_source(config, env, learner, env.reset())
     iteration, frames_per_batch = 0, config.frames_per_batch
 
     def block(live: LiveView | None, recording: Path) -> tuple[float, float]:
-        nonlocal carry, iteration
+        nonlocal iteration
         start, cpu_start = time.perf_counter(), time.process_time()
         for _ in range(iterations):
             iteration += 1
-            _, carry, finished, losses = learn(config, env, learner, multipliers, generator,
-                                               episodes, carry, iteration * frames_per_batch)
+            _, finished, losses = learn(config, env, learner, multipliers, generator,
+                                        episodes, batches, iteration * frames_per_batch)
             if live is not None:
                 live.log_iteration({"iteration": iteration,
                                     **episode_columns(finished, env.constraints),

@@ -23,9 +23,10 @@ from crllk.config import TrainConfig, validate
 from crllk.envs.batched import BatchedLaneKeepingEnv
 from crllk.envs.episodes import EpisodeAccumulator
 from crllk.envs.parallel import ParallelLaneKeepingEnv
+from crllk.training.batches import collect_batch, first_carry
 from crllk.training.build import build_run
 from crllk.training.compose import compose_config
-from crllk.training.loop import collect_batch, first_carry, learn
+from crllk.training.loop import batch_source, learn
 from crllk.training.updates import shape_signals
 
 
@@ -49,17 +50,17 @@ def bench_config(overrides: Sequence[str] = ()) -> TrainConfig:
 def training_rates(config: TrainConfig, iterations: int = 5) -> TrainingRates:
     """Times ``iterations`` training iterations and as many environment-only steps."""
     env, learner, multipliers, generator = build_run(config)
-    carry = env.reset()
-
+    batches = batch_source(config, env, learner, env.reset())
     episodes = EpisodeAccumulator(config.num_envs, env.constraints)
 
-    def iterate(td):
-        return learn(config, env, learner, multipliers, generator, episodes, td, 0)[1]
+    def iterate() -> None:
+        learn(config, env, learner, multipliers, generator, episodes, batches, 0)
 
-    carry = iterate(carry)  # warm-up
+    iterate()  # warm-up (with collect_ahead: also starts the first batch ahead)
     start = time.perf_counter()
     for _ in range(iterations):
-        carry = iterate(carry)
+        iterate()
+    batches.settle()  # the last batch collected ahead counts as a cost, not a frame
     training = iterations * config.frames_per_batch / (time.perf_counter() - start)
 
     steps = iterations * config.rollout_steps
@@ -119,9 +120,11 @@ def collection_rates(config: TrainConfig, iterations: int = 3) -> CollectionRate
         update_s = time.perf_counter() - start
 
         episodes = EpisodeAccumulator(config.num_envs, env.constraints)
+        batches = batch_source(config, env, learner, carry)
         start = time.perf_counter()
         for _ in range(iterations):
-            carry = learn(config, env, learner, multipliers, generator, episodes, carry, 0)[1]
+            learn(config, env, learner, multipliers, generator, episodes, batches, 0)
+        batches.settle()
         iterating = (time.perf_counter() - start) / iterations
 
         observations = batch[:, -1].select(*learner.actor.in_keys)

@@ -87,6 +87,7 @@ class ParallelLaneKeepingEnv(MirroredTeacherFlag, EnvBase):
             raise ValueError("at least one worker is needed")
         if num_threads is not None:
             torch.set_num_threads(num_threads)
+        self._running = False
         self._pipes: list[Connection] = []
         self._processes: list[multiprocessing.process.BaseProcess] = []
         try:
@@ -165,6 +166,7 @@ class ParallelLaneKeepingEnv(MirroredTeacherFlag, EnvBase):
     def _call(self, name: str, arguments: Sequence[Sequence[Any]] | None = None) -> list[Any]:
         """Method ``name`` of every worker's env, worker ``w`` with ``arguments[w]`` (none
         without), or the attribute ``name``; their results in worker order."""
+        self._check_idle()
         for index, pipe in enumerate(self._pipes):
             pipe.send(("call", (name, () if arguments is None else tuple(arguments[index]))))
         return self._gather()
@@ -174,9 +176,37 @@ class ParallelLaneKeepingEnv(MirroredTeacherFlag, EnvBase):
         once; the results in worker order. ``function`` must be a module-level function (the
         workers import it); what it takes and returns crosses a pipe (keep it to numpy
         arrays and plain values)."""
+        self.start(function, arguments)
+        return self.finish()
+
+    def start(self, function: Callable[..., Any], arguments: Sequence[Sequence[Any]]) -> None:
+        """Starts :meth:`run` and returns at once: the workers compute while this process
+        does something else; :meth:`finish` waits for their results. Nothing else may be
+        asked of the workers meanwhile.
+
+        Raises:
+            RuntimeError: if a started run has not been finished.
+        """
+        self._check_idle()
         for pipe, args in zip(self._pipes, arguments, strict=True):
             pipe.send(("run", (function, tuple(args))))
+        self._running = True
+
+    def finish(self) -> list[Any]:
+        """The results of the run :meth:`start` started, in worker order (blocking)."""
+        if not self._running:
+            raise RuntimeError("no run was started")
+        self._running = False
         return self._gather()
+
+    @property
+    def running(self) -> bool:
+        """Whether a started run has not been finished."""
+        return self._running
+
+    def _check_idle(self) -> None:
+        if self._running:
+            raise RuntimeError("the workers are running a started run: finish() it first")
 
     def _send_teacher_active(self, active: bool) -> None:
         self._call("set_teacher_active", [[active]] * self.workers)
@@ -188,6 +218,7 @@ class ParallelLaneKeepingEnv(MirroredTeacherFlag, EnvBase):
 
     # ----- reset and step -----------------------------------------------------------------
     def _reset(self, tensordict: TensorDictBase | None = None, **kwargs: Any) -> TensorDictBase:
+        self._check_idle()
         mask = None if tensordict is None else tensordict.get("_reset", None)
         masks = (None if mask is None
                  else mask.reshape(self.workers, self.per_worker).numpy())
@@ -196,6 +227,7 @@ class ParallelLaneKeepingEnv(MirroredTeacherFlag, EnvBase):
         return self._joined(self._gather())
 
     def _step(self, tensordict: TensorDictBase) -> TensorDictBase:
+        self._check_idle()
         actions = tensordict.get("action").detach().cpu().numpy()
         for pipe, share in zip(self._pipes, np.split(actions, self.workers), strict=True):
             pipe.send(("step", share))

@@ -5,7 +5,8 @@
 the tensordict to continue from and its simulations' action streams; each worker then runs
 :func:`crllk.rl.rollout.collect` on its own simulations, policy included, with no round trip
 per step, and sends back its transitions. The parent waits in the kernel meanwhile, so the
-workers have the cores to themselves.
+workers have the cores to themselves; or (:func:`start_collection`) it updates the networks
+meanwhile, on the batch before.
 
 The batch equals what :func:`~crllk.rl.rollout.collect` gives in one process from the same
 carry and streams: each simulation samples from its own stream
@@ -55,16 +56,39 @@ def collect_in_workers(env: ParallelLaneKeepingEnv, actor: torch.nn.Module,
     of ``actor``; the transitions ``[N, steps]`` and the tensordict to continue from, as
     :func:`~crllk.rl.rollout.collect` returns them. ``noise`` continues from where the
     workers left their streams."""
+    return start_collection(env, actor, carry, steps, noise).finish()
+
+
+class Collection:
+    """A :func:`collect_in_workers` under way in the workers (:func:`start_collection`)."""
+
+    def __init__(self, env: ParallelLaneKeepingEnv, steps: int, noise: ActionNoise) -> None:
+        self._env, self._steps, self._noise = env, steps, noise
+
+    def finish(self) -> tuple[TensorDictBase, TensorDictBase]:
+        """Waits for the workers: the transitions and the tensordict to continue from;
+        ``noise`` continues from where the workers left their streams."""
+        env = self._env
+        answers = env.finish()
+        batch = joined((answer[0] for answer in answers), torch.Size([env.num_envs, self._steps]))
+        following = joined((answer[1] for answer in answers), env.batch_size)
+        self._noise.load_states([torch.from_numpy(state)
+                                 for answer in answers for state in answer[2]])
+        return batch, following
+
+
+def start_collection(env: ParallelLaneKeepingEnv, actor: torch.nn.Module,
+                     carry: TensorDictBase, steps: int, noise: ActionNoise) -> Collection:
+    """Starts :func:`collect_in_workers` and returns at once, with ``actor`` as it is now (the
+    workers get a copy): this process may change the actor meanwhile (update it), and
+    :meth:`Collection.finish` waits for the batch. ``noise`` must not be used meanwhile."""
     policy = pickle.dumps(actor)  # this process's own object, read only by its own workers
     n = env.per_worker
     states = [state.numpy() for state in noise.states()]
     shares = [(policy, to_arrays(carry[w * n:(w + 1) * n]), states[w * n:(w + 1) * n], steps)
               for w in range(env.workers)]
-    answers = env.run(collect_share, shares)
-    batch = joined((answer[0] for answer in answers), torch.Size([env.num_envs, steps]))
-    following = joined((answer[1] for answer in answers), env.batch_size)
-    noise.load_states([torch.from_numpy(state) for answer in answers for state in answer[2]])
-    return batch, following
+    env.start(collect_share, shares)
+    return Collection(env, steps, noise)
 
 
 def collect_share(env: BatchedLaneKeepingEnv, policy: bytes, carry: Arrays,
@@ -78,4 +102,5 @@ def collect_share(env: BatchedLaneKeepingEnv, policy: bytes, carry: Arrays,
     return to_arrays(batch), to_arrays(following), [s.numpy() for s in noise.states()]
 
 
-__all__ = ["collect_in_workers", "collect_share", "joined", "to_arrays"]
+__all__ = ["Collection", "collect_in_workers", "collect_share", "joined", "start_collection",
+           "to_arrays"]

@@ -159,9 +159,12 @@ def check_format(path: str | Path, state: object, *, resuming: bool = False) -> 
 def checkpoint_state(config: TrainConfig, learner: Learner, multipliers: dict[str, Multiplier],
                      episodes: EpisodeAccumulator, env: TrainingEnv,
                      generator: torch.Generator, carry: TensorDictBase | None, *, iteration: int,
-                     frames: int, elapsed: float) -> dict[str, Any]:
+                     frames: int, elapsed: float, ahead: TensorDictBase | None = None
+                     ) -> dict[str, Any]:
     """What :func:`restore` needs; ``env``, ``carry`` and the running episode sums are None
-    when the simulations' state is not kept (remote collectors)."""
+    when the simulations' state is not kept (remote collectors). ``ahead``: the batch
+    collected ahead and not yet learned from (``collect_ahead``; the simulations, ``carry``
+    and the action streams as its collection left them)."""
     snapshots = keeps_snapshots(env)
     return {
         "iteration": iteration, "frames": frames, "elapsed": elapsed,
@@ -171,6 +174,7 @@ def checkpoint_state(config: TrainConfig, learner: Learner, multipliers: dict[st
         "episodes": episodes.state_dict() if snapshots else None,
         "env": env.sim_state() if snapshots else None,
         "carry": tensordict_to_plain(carry.clone()) if snapshots else None,
+        "ahead": tensordict_to_plain(ahead.clone()) if snapshots and ahead is not None else None,
         "torch_rng": torch.get_rng_state(),
         "generator": generator.get_state(),
         "action_noise": learner.action_noise.states(),
@@ -199,3 +203,10 @@ def restore(state: dict[str, Any], learner: Learner, multipliers: dict[str, Mult
 def resumed_carry(state: dict[str, Any]) -> TensorDictBase:
     """The tensordict collection continues from, as :func:`checkpoint_state` kept it."""
     return tensordict_from_plain(state["carry"])
+
+
+def resumed_ahead(state: dict[str, Any]) -> TensorDictBase | None:
+    """The batch collected ahead that :func:`checkpoint_state` kept, learned from first (None:
+    none was; checkpoints written before ``collect_ahead`` have none)."""
+    ahead = state.get("ahead")
+    return None if ahead is None else tensordict_from_plain(ahead)

@@ -2,7 +2,9 @@
 
 One iteration (:func:`learn`, then the logs):
 
-1. collect ``rollout_steps`` control steps in each of ``num_envs`` simulations;
+1. collect ``rollout_steps`` control steps in each of ``num_envs`` simulations (with
+   ``collect_ahead``, the workers collected them during the previous update:
+   :mod:`crllk.training.batches`);
 2. update the multipliers λ from the episodes that finished (dual ascent);
 3. the learner (:mod:`crllk.algos`, ``algo.learner``) learns from the batch with these
    multipliers (PPO-Lagrangian: GAE for the reward and each cost, PPO epochs on the combined
@@ -15,7 +17,8 @@ One iteration (:func:`learn`, then the logs):
    the row and the recordings to the run's live view (:mod:`crllk.recording.live`).
 
 The checkpoint holds the networks, the optimiser, the multipliers, the counters, the random
-generators, the simulations' full state and the running episode sums, so ``resume=true``
+generators, the simulations' full state, the running episode sums and the batch collected
+ahead (``collect_ahead``), so ``resume=true``
 continues exactly where the uninterrupted run would have been. With remote collectors
 (``collector=ray``) the simulations' state stays on the collectors: a resumed run restores the
 rest and starts fresh episodes.
@@ -25,8 +28,7 @@ from __future__ import annotations
 
 import sys
 import time
-from collections.abc import Callable, Iterator, Sequence
-from contextlib import contextmanager
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -38,16 +40,14 @@ from tqdm import tqdm
 import crllk  # noqa: F401  (chooses the headless GL backend before torchrl imports mujoco)
 from crllk.config import TrainConfig
 from crllk.envs.batched import BatchedLaneKeepingEnv
-from crllk.envs.distributed import RayLaneKeepingCollector
 from crllk.envs.episodes import EpisodeAccumulator, EpisodeStats, summarise
-from crllk.envs.parallel import LaneKeepingEnv, ParallelLaneKeepingEnv
+from crllk.envs.parallel import LaneKeepingEnv
 from crllk.errors import ConfigError
 from crllk.files import atomic_write_text, remove_stale_temp_files
-from crllk.rl.collection import collect_in_workers
 from crllk.rl.lagrange import Multiplier
-from crllk.rl.rollout import EvaluationResult, collect, run_episodes
-from crllk.rl.sampling import ActionNoise
+from crllk.rl.rollout import EvaluationResult, run_episodes
 from crllk.tasks.constraints import Constraint
+from crllk.training.batches import BatchSource, first_carry
 from crllk.training.build import Learner, TrainingEnv, build_env, build_eval_env, build_run
 from crllk.training.checkpoints import (
     POLICY_FILE,
@@ -56,6 +56,7 @@ from crllk.training.checkpoints import (
     policy_info,
     policy_state,
     restore,
+    resumed_ahead,
     resumed_carry,
     save_checkpoint,
 )
@@ -109,7 +110,8 @@ def train(config: TrainConfig, on_final_evaluation: FinalEvaluation | None = Non
         # as the iteration before left it, so that the run collects as the straight one
         env.teacher_active = learner.needs_teacher(state["frames"])
         exact = restore(state, learner, multipliers, episodes, env, generator)
-        carry = resumed_carry(state) if exact else first_carry(env)
+        batches = (batch_source(config, env, learner, resumed_carry(state), resumed_ahead(state))
+                   if exact else batch_source(config, env, learner, first_carry(env)))
         iteration, frames, elapsed = state["iteration"], state["frames"], state["elapsed"]
         metrics.truncate_after(iteration)
         evaluations.truncate_after(iteration)
@@ -120,7 +122,7 @@ def train(config: TrainConfig, on_final_evaluation: FinalEvaluation | None = Non
         run_dir.mkdir(parents=True, exist_ok=True)
         atomic_write_text(run_dir / "config.yaml", OmegaConf.to_yaml(OmegaConf.structured(config)))
         env.teacher_active = learner.needs_teacher(0)
-        carry = first_carry(env)
+        batches = batch_source(config, env, learner, first_carry(env))
         print(f"run directory: {run_dir}", flush=True)
     live = open_live_view(config, run_dir, constraints, learner.diagnostic_names)
 
@@ -129,8 +131,8 @@ def train(config: TrainConfig, on_final_evaluation: FinalEvaluation | None = Non
     started = time.perf_counter() - elapsed
     while frames < config.total_frames:
         iteration_start = time.perf_counter()
-        batch, carry, finished, losses = learn(config, env, learner, multipliers, generator,
-                                               episodes, carry, frames)
+        batch, finished, losses = learn(config, env, learner, multipliers, generator,
+                                        episodes, batches, frames)
         iteration += 1
         frames += batch.numel()
 
@@ -162,9 +164,11 @@ def train(config: TrainConfig, on_final_evaluation: FinalEvaluation | None = Non
             if live is not None and recording is not None:
                 live.add_recording(recording)
         if iteration % config.checkpoint_every == 0 or frames >= config.total_frames:
+            batches.settle()  # the simulations as the batch collected ahead left them
             state = checkpoint_state(
-                config, learner, multipliers, episodes, env, generator, carry,
-                iteration=iteration, frames=frames, elapsed=time.perf_counter() - started)
+                config, learner, multipliers, episodes, env, generator, batches.carry,
+                ahead=batches.ahead(), iteration=iteration, frames=frames,
+                elapsed=time.perf_counter() - started)
             save_checkpoint(checkpoint_path, state)
             save_checkpoint(run_dir / POLICY_FILE, policy_state(state))
             if final_result is not None and on_final_evaluation is not None:
@@ -184,54 +188,32 @@ def train(config: TrainConfig, on_final_evaluation: FinalEvaluation | None = Non
 
 def learn(config: TrainConfig, env: TrainingEnv, learner: Learner,
           multipliers: dict[str, Multiplier], generator: torch.Generator,
-          episodes: EpisodeAccumulator, carry: TensorDictBase | None, frames: int
-          ) -> tuple[TensorDictBase, TensorDictBase | None, list[EpisodeStats], dict[str, float]]:
-    """One iteration of learning after ``frames``: collect ``rollout_steps`` steps of every
-    sub-environment, update the multipliers from the episodes that finished, let the learner
-    learn from the batch. Returns the batch, the tensordict to continue from, the finished
+          episodes: EpisodeAccumulator, batches: BatchSource, frames: int
+          ) -> tuple[TensorDictBase, list[EpisodeStats], dict[str, float]]:
+    """One iteration of learning after ``frames``: the next batch of ``rollout_steps`` steps of
+    every sub-environment, the multipliers updated from the episodes that finished, the
+    learner's update on the batch (with ``collect_ahead``, while the workers collect the next
+    one; after the last iteration that one waits in the final checkpoint, so that a run
+    resumed to more frames learns as a longer one would). Returns the batch, the finished
     episodes and the learner's diagnostics."""
-    batch, carry = collect_batch(env, learner.actor, carry, config.rollout_steps,
-                                 learner.action_noise)
+    batch = batches.next()
     finished = episodes.add_batch(batch)
     update_multipliers(multipliers, finished)
     learner.prepare(frames, {name: m.value for name, m in multipliers.items()})
     env.teacher_active = learner.needs_teacher(frames + batch.numel())
+    batches.prefetch()
     shape_signals(batch, config, env.config)
     losses = learner.update(batch, generator)
-    return batch, carry, finished, losses
+    return batch, finished, losses
 
 
-def first_carry(env: TrainingEnv) -> TensorDictBase | None:
-    """What collection starts from: a reset of every simulation, or None for remote
-    collectors (they reset their own simulations when they start)."""
-    return None if isinstance(env, RayLaneKeepingCollector) else env.reset()
-
-
-def collect_batch(env: TrainingEnv, actor: torch.nn.Module, carry: TensorDictBase | None,
-                  steps: int, noise: ActionNoise) -> tuple[TensorDictBase, TensorDictBase | None]:
-    """``steps`` steps of every simulation with the stochastic policy (the transitions
-    ``[num_envs, steps]``) and what to continue from: :func:`crllk.rl.rollout.collect` from
-    ``carry`` with the simulations' action streams ``noise``, in this process or in the
-    worker processes (the same batch either way), or a batch of the remote collectors with the
-    policy's current weights."""
-    if isinstance(env, RayLaneKeepingCollector):
-        return env.collect(actor, steps), None
-    if isinstance(env, ParallelLaneKeepingEnv):
-        return collect_in_workers(env, actor, carry, steps, noise)
-    with torch_threads(1):  # as in a worker: the same kernels, so the same actions
-        return collect(env, actor, carry, steps, noise)
-
-
-@contextmanager
-def torch_threads(count: int) -> Iterator[None]:
-    """Torch runs ``count`` CPU threads meanwhile: with simulation workers stepping on every
-    core, the policy's forward passes in more threads only spin against them."""
-    previous = torch.get_num_threads()
-    torch.set_num_threads(count)
-    try:
-        yield
-    finally:
-        torch.set_num_threads(previous)
+def batch_source(config: TrainConfig, env: TrainingEnv, learner: Learner,
+                 carry: TensorDictBase | None, ready: TensorDictBase | None = None
+                 ) -> BatchSource:
+    """The run's :class:`BatchSource`: ``collect_ahead`` as configured, continuing from
+    ``carry`` (and first learning from ``ready``, a checkpoint's batch collected ahead)."""
+    return BatchSource(env, learner.actor, config.rollout_steps, learner.action_noise, carry,
+                       ahead=config.collect_ahead, ready=ready)
 
 
 def prepare_run_dir(config: TrainConfig, run_dir: Path, checkpoint_path: Path) -> bool:

@@ -1,0 +1,92 @@
+"""``collect_ahead``: the workers collect the next batch during the update, with the policy
+as it was before it; a stopped run resumes exactly, and the setting is refused where no
+worker processes collect."""
+
+from __future__ import annotations
+
+import copy
+
+import pytest
+import torch
+from tiny_runs import assert_same_runs, read_rows, run_in_process
+
+from crllk.config import validate
+from crllk.errors import ConfigError
+from crllk.training.batches import BatchSource, collect_batch
+from crllk.training.build import build_run
+from crllk.training.checkpoints import load_checkpoint
+from crllk.training.compose import compose_config
+
+NUM_ENVS, ROLLOUT = 2, 4
+FRAMES = NUM_ENVS * ROLLOUT
+AHEAD = [f"num_envs={NUM_ENVS}", f"rollout_steps={ROLLOUT}", "obs=state", "eval.final=false",
+         "ppo.anneal_lr=false", "workers=2", "collect_ahead=true"]
+
+
+def test_a_batch_collected_ahead_is_collected_by_the_policy_before_the_update():
+    """prefetch() copies the policy: changing the networks afterwards (as the update does)
+    leaves the batch under way as the unchanged policy collects it from the same simulations
+    and streams; collecting with the changed policy gives another batch. Meanwhile the workers
+    refuse any other command."""
+    config = validate(compose_config(AHEAD))
+    env, learner, _, _ = build_run(config)
+    try:
+        carry = env.reset()
+        snapshot, streams = env.sim_state(), learner.action_noise.states()
+        before = copy.deepcopy(learner.actor)
+        source = BatchSource(env, learner.actor, ROLLOUT, learner.action_noise, carry.clone(),
+                             ahead=True)
+        source.prefetch()
+        with pytest.raises(RuntimeError, match="finish"):
+            env.reset()
+        with torch.no_grad():
+            for parameter in learner.actor.parameters():
+                parameter.add_(0.5)
+        ahead = source.next()
+        assert source.ahead() is None and not env.running
+
+        def collected_by(actor):
+            env.load_sim_state(snapshot)
+            learner.action_noise.load_states(streams)
+            return collect_batch(env, actor, carry.clone(), ROLLOUT, learner.action_noise)[0]
+
+        expected = collected_by(before)
+        for key in ("action", "action_log_prob", "logits", ("next", "reward")):
+            torch.testing.assert_close(ahead[key], expected[key], rtol=0, atol=0)
+        changed = collected_by(learner.actor)
+        assert not torch.equal(changed["logits"], ahead["logits"])
+    finally:
+        env.close()
+
+
+def test_a_run_collecting_ahead_keeps_its_next_batch_and_resumes_exactly(tmp_path):
+    """A collect_ahead run stopped after two iterations keeps the batch it collected during
+    the second update in its checkpoint, and resumed for two more equals an uninterrupted run
+    bit for bit."""
+    stopped = run_in_process(tmp_path / "stopped", 2, AHEAD, frames_per_iteration=FRAMES)
+    ahead = load_checkpoint(stopped / "checkpoints" / "last.pt")["ahead"]
+    assert ahead is not None and ahead["batch_size"] == [NUM_ENVS, ROLLOUT]
+    run_in_process(stopped, 4, [*AHEAD, "resume=true"], frames_per_iteration=FRAMES)
+    straight = run_in_process(tmp_path / "straight", 4, AHEAD, frames_per_iteration=FRAMES)
+    assert_same_runs(straight, stopped, 4)
+
+
+def test_collecting_ahead_learns_from_older_batches(tmp_path):
+    """The first batch is the same either way (the initial policy collects it); the second
+    is collected by the policy before the first update instead of after it, so the runs part
+    from there (collect_ahead changes what is learned)."""
+    ahead = run_in_process(tmp_path / "ahead", 2, AHEAD, frames_per_iteration=FRAMES)
+    straight = run_in_process(tmp_path / "straight", 2, [*AHEAD, "collect_ahead=false"],
+                              frames_per_iteration=FRAMES)
+    rows = [read_rows(run / "metrics.csv") for run in (ahead, straight)]
+    assert rows[0][0]["loss_objective"] == rows[1][0]["loss_objective"]
+    assert rows[0][1]["loss_objective"] != rows[1][1]["loss_objective"]
+
+
+@pytest.mark.parametrize("overrides", [["workers=1"], ["collector=ray", "workers=2"]])
+def test_collecting_ahead_without_local_workers_is_refused(overrides):
+    """One line naming the setting: one process, or remote collectors, cannot collect during
+    the update."""
+    with pytest.raises(ConfigError) as error:
+        validate(compose_config(["obs=state", "collect_ahead=true", *overrides]))
+    assert "collect_ahead: needs the simulations in worker processes" in str(error.value)
