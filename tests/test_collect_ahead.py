@@ -35,15 +35,18 @@ def test_a_batch_collected_ahead_is_collected_by_the_policy_before_the_update():
         snapshot, streams = env.sim_state(), learner.action_noise.states()
         before = copy.deepcopy(learner.actor)
         source = BatchSource(env, learner.actor, ROLLOUT, learner.action_noise, carry.clone(),
-                             ahead=True)
+                             collect_ahead=True)
         source.prefetch()
-        with pytest.raises(RuntimeError, match="finish"):
-            env.reset()
+        for busy in (env.reset, env.sim_state):
+            with pytest.raises(RuntimeError, match="finish"):
+                busy()
         with torch.no_grad():
             for parameter in learner.actor.parameters():
                 parameter.add_(0.5)
         ahead = source.next()
-        assert source.ahead() is None and not env.running
+        assert source.pending() is None and not env.running
+        with pytest.raises(RuntimeError, match="no run was started"):
+            env.finish()
 
         def collected_by(actor):
             env.load_sim_state(snapshot)
@@ -62,13 +65,20 @@ def test_a_batch_collected_ahead_is_collected_by_the_policy_before_the_update():
 def test_a_run_collecting_ahead_keeps_its_next_batch_and_resumes_exactly(tmp_path):
     """A collect_ahead run stopped after two iterations keeps the batch it collected during
     the second update in its checkpoint, and resumed for two more equals an uninterrupted run
-    bit for bit."""
-    stopped = run_in_process(tmp_path / "stopped", 2, AHEAD, frames_per_iteration=FRAMES)
+    bit for bit: one that checkpoints only at its end, so its batches come straight from
+    the collections under way, and across the teacher's end (after two iterations), where
+    the workers' teacher flag turns off between a collection and the next."""
+    teacher = ["teacher.final=0", f"teacher.frames={2 * FRAMES}"]
+    stopped = run_in_process(tmp_path / "stopped", 2, [*AHEAD, *teacher],
+                             frames_per_iteration=FRAMES)
     ahead = load_checkpoint(stopped / "checkpoints" / "last.pt")["ahead"]
     assert ahead is not None and ahead["batch_size"] == [NUM_ENVS, ROLLOUT]
-    run_in_process(stopped, 4, [*AHEAD, "resume=true"], frames_per_iteration=FRAMES)
-    straight = run_in_process(tmp_path / "straight", 4, AHEAD, frames_per_iteration=FRAMES)
-    assert_same_runs(straight, stopped, 4)
+    run_in_process(stopped, 4, [*AHEAD, *teacher, "resume=true"], frames_per_iteration=FRAMES)
+    straight = run_in_process(tmp_path / "straight", 4, [*AHEAD, *teacher, "checkpoint_every=4"],
+                              frames_per_iteration=FRAMES)
+    assert_same_runs(straight, stopped, 4, ignore=["checkpoint_every"])
+    rows = read_rows(straight / "metrics.csv")
+    assert [float(r["loss_imitation"]) != 0 for r in rows] == [True, True, False, False]
 
 
 def test_collecting_ahead_learns_from_older_batches(tmp_path):
@@ -90,3 +100,16 @@ def test_collecting_ahead_without_local_workers_is_refused(overrides):
     with pytest.raises(ConfigError) as error:
         validate(compose_config(["obs=state", "collect_ahead=true", *overrides]))
     assert "collect_ahead: needs the simulations in worker processes" in str(error.value)
+
+
+@pytest.mark.parametrize(("overrides", "labels"), [
+    ([], ["state", "state, collect_ahead", "pixels"]),
+    (["workers=1"], ["state", "pixels"]),
+    (["collect_ahead=true"], ["state, collect_ahead", "pixels, collect_ahead"])])
+def test_the_bench_times_state_collecting_ahead_where_it_can(overrides, labels):
+    """``python -m crllk.bench --training`` adds the state figure collecting ahead, unless the
+    overrides decide collect_ahead themselves or leave one process."""
+    from crllk.bench.cli import training_bench_configs
+
+    configs = training_bench_configs("small_loop", overrides)
+    assert [c.obs.name + (", collect_ahead" if c.collect_ahead else "") for c in configs] == labels

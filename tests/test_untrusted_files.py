@@ -21,6 +21,7 @@ from crllk.cli import exit_status
 from crllk.rl.plain import tensordict_from_plain, tensordict_to_plain
 from crllk.training.checkpoints import (
     CHECKPOINT_FORMAT,
+    CONVERTED_FORMATS,
     UnsafeFileError,
     load_checkpoint,
     read_state,
@@ -198,10 +199,10 @@ def test_convert_with_the_opt_in_converts_a_run_that_then_evaluates(tmp_path, tr
     assert exit_status(lambda: convert.main([f"path={run_dir}", "trust=true"])) == 0
     assert capsys.readouterr().out.splitlines() == [
         f"{run_dir / POLICY_FILE}: loads without running code, left as it is",
-        f"{path}: converted from format 3 to {CHECKPOINT_FORMAT}"]
+        f"{path}: converted from format 3 to {CONVERTED_FORMATS[3]}"]
     assert (run_dir / POLICY_FILE).read_bytes() == policy
     state = torch.load(path, weights_only=True)
-    assert state["format"] == CHECKPOINT_FORMAT and isinstance(state["carry"], dict)
+    assert state["format"] == CONVERTED_FORMATS[3] and isinstance(state["carry"], dict)
     assert exit_status(lambda: evaluate.main([f"run={run_dir}", "episodes=2",
                                               "num_envs=2"])) == 0
     assert (run_dir / "eval.json").exists()

@@ -51,7 +51,11 @@ class Learner(Protocol):
     def update(self, batch: TensorDictBase, generator: torch.Generator) -> dict[str, float]:
         """Learns from one batch of transitions ``[num_envs, steps]`` (rewards and costs
         already shaped); ``generator`` orders the minibatches. Returns named losses and
-        diagnostics (means over the update)."""
+        diagnostics (means over the update). With ``collect_ahead`` the batch was collected
+        by the policy as it was before the previous update (and the next one is being
+        collected meanwhile, by a copy of the actor as :meth:`prepare` left it): an update
+        must weigh its samples by the probabilities stored with them (``action_log_prob``),
+        and must not use ``action_noise``."""
 
     def state_dict(self) -> dict[str, Any]:
         """Everything to resume the learner exactly, in tensors and plain containers; the

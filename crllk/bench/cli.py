@@ -128,7 +128,8 @@ def main(argv: Sequence[str] | None = None) -> None:
             observation = config.obs.name
             ahead = ", collect_ahead" if config.collect_ahead else ""
             rates = training_rates(config, iterations=args.iterations)
-            print_row(f"env only, {observation}, num_envs={config.num_envs}", rates.environment)
+            print_row(f"env only, {observation}{ahead}, num_envs={config.num_envs}",
+                      rates.environment)
             print_row(f"training, {observation}{ahead} (frames/s)", rates.training,
                        rates.environment, 0.5)
     if worker_configs:

@@ -29,8 +29,9 @@ from crllk.envs.episodes import EpisodeAccumulator
 from crllk.recording.live import LiveView, live_url, server_sink
 from crllk.recording.recorder import record_episodes
 from crllk.recording.viewer import free_port, start_viewer, stop_viewer
+from crllk.training.batches import BatchSource
 from crllk.training.build import Learner, build_env, build_run
-from crllk.training.loop import batch_source, episode_columns, learn
+from crllk.training.loop import episode_columns, learn
 
 _TARGET = 0.05
 """The live view may cost at most this share of training frames/s."""
@@ -62,7 +63,7 @@ def live_cost(config: TrainConfig, iterations: int, repetitions: int, viewer: bo
     """Alternating off/on blocks of ``iterations`` iterations, ``repetitions`` of each."""
     env, learner, multipliers, generator = build_run(config)
     episodes = EpisodeAccumulator(config.num_envs, env.constraints)
-    batches = batch_source(config, env, learner, env.reset())
+    batches = BatchSource.for_run(config, env, learner, env.reset())
     iteration, frames_per_batch = 0, config.frames_per_batch
 
     def block(live: LiveView | None, recording: Path) -> tuple[float, float]:

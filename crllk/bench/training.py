@@ -23,10 +23,10 @@ from crllk.config import TrainConfig, validate
 from crllk.envs.batched import BatchedLaneKeepingEnv
 from crllk.envs.episodes import EpisodeAccumulator
 from crllk.envs.parallel import ParallelLaneKeepingEnv
-from crllk.training.batches import collect_batch, first_carry
+from crllk.training.batches import BatchSource, collect_batch, first_carry
 from crllk.training.build import build_run
 from crllk.training.compose import compose_config
-from crllk.training.loop import batch_source, learn
+from crllk.training.loop import learn
 from crllk.training.updates import shape_signals
 
 
@@ -50,7 +50,7 @@ def bench_config(overrides: Sequence[str] = ()) -> TrainConfig:
 def training_rates(config: TrainConfig, iterations: int = 5) -> TrainingRates:
     """Times ``iterations`` training iterations and as many environment-only steps."""
     env, learner, multipliers, generator = build_run(config)
-    batches = batch_source(config, env, learner, env.reset())
+    batches = BatchSource.for_run(config, env, learner, env.reset())
     episodes = EpisodeAccumulator(config.num_envs, env.constraints)
 
     def iterate() -> None:
@@ -85,7 +85,7 @@ def random_steps(env: BatchedLaneKeepingEnv, steps: int) -> None:
 
 @dataclass(frozen=True)
 class CollectionRates:
-    """Frames per second of collection alone (:func:`crllk.training.loop.collect_batch`: the
+    """Frames per second of collection alone (:func:`crllk.training.batches.collect_batch`: the
     policy in this process and the simulations in ``workers`` processes, or both in
     ``workers`` remote collectors with ``collector=ray``) and of whole training iterations,
     with the main process's own shares of an iteration."""
@@ -120,7 +120,7 @@ def collection_rates(config: TrainConfig, iterations: int = 3) -> CollectionRate
         update_s = time.perf_counter() - start
 
         episodes = EpisodeAccumulator(config.num_envs, env.constraints)
-        batches = batch_source(config, env, learner, carry)
+        batches = BatchSource.for_run(config, env, learner, carry)
         start = time.perf_counter()
         for _ in range(iterations):
             learn(config, env, learner, multipliers, generator, episodes, batches, 0)

@@ -188,9 +188,9 @@ class ParallelLaneKeepingEnv(MirroredTeacherFlag, EnvBase):
             RuntimeError: if a started run has not been finished.
         """
         self._check_idle()
+        self._running = True  # before sending: a send that fails leaves workers computing
         for pipe, args in zip(self._pipes, arguments, strict=True):
             pipe.send(("run", (function, tuple(args))))
-        self._running = True
 
     def finish(self) -> list[Any]:
         """The results of the run :meth:`start` started, in worker order (blocking)."""
@@ -205,6 +205,8 @@ class ParallelLaneKeepingEnv(MirroredTeacherFlag, EnvBase):
         return self._running
 
     def _check_idle(self) -> None:
+        """Raises RuntimeError while a started run is unfinished (its answers would come
+        first)."""
         if self._running:
             raise RuntimeError("the workers are running a started run: finish() it first")
 
@@ -272,6 +274,12 @@ class ParallelLaneKeepingEnv(MirroredTeacherFlag, EnvBase):
 
     def _stop(self) -> None:
         self._closed = True
+        if self._running:  # take the answers of a started run, so its workers can exit
+            self._running = False
+            for pipe in self._pipes:
+                with suppress(OSError, EOFError):
+                    if pipe.poll(CLOSE_TIMEOUT_S):
+                        pipe.recv()
         for pipe in self._pipes:
             with suppress(OSError):  # a worker that already exited
                 pipe.send(("close", None))

@@ -10,7 +10,7 @@ collecting policy stored with each action (``action_log_prob``), and its clippin
 an update may move from it.
 
 A checkpoint waits for the batch under way (:meth:`BatchSource.settle`) and keeps it
-(:meth:`BatchSource.ahead`), with the simulations, the tensordict to continue from and the
+(:meth:`BatchSource.pending`), with the simulations, the tensordict to continue from and the
 action streams as that collection left them, so a resumed run learns from the same batch.
 """
 
@@ -22,12 +22,13 @@ from contextlib import contextmanager
 import torch
 from tensordict import TensorDictBase
 
+from crllk.config import TrainConfig
 from crllk.envs.distributed import RayLaneKeepingCollector
 from crllk.envs.parallel import ParallelLaneKeepingEnv
 from crllk.rl.collection import Collection, collect_in_workers, start_collection
 from crllk.rl.rollout import collect
 from crllk.rl.sampling import ActionNoise
-from crllk.training.build import TrainingEnv
+from crllk.training.build import Learner, TrainingEnv
 
 
 class BatchSource:
@@ -39,22 +40,32 @@ class BatchSource:
         steps: control steps of every simulation per batch.
         noise: the simulations' action streams.
         carry: what collection continues from (None: the remote collectors reset their own).
-        ahead: collect the next batch during the update (needs a
+        collect_ahead: collect the next batch during the update (needs a
             :class:`~crllk.envs.parallel.ParallelLaneKeepingEnv`).
-        ready: a batch collected before (a checkpoint's :meth:`ahead`), learned from next.
+        ready: a batch collected before (a checkpoint's :meth:`pending`), learned from next.
     """
 
     def __init__(self, env: TrainingEnv, actor: torch.nn.Module, steps: int,
-                 noise: ActionNoise, carry: TensorDictBase | None, *, ahead: bool = False,
-                 ready: TensorDictBase | None = None) -> None:
-        if ahead and not isinstance(env, ParallelLaneKeepingEnv):
+                 noise: ActionNoise, carry: TensorDictBase | None, *,
+                 collect_ahead: bool = False, ready: TensorDictBase | None = None) -> None:
+        if collect_ahead and not isinstance(env, ParallelLaneKeepingEnv):
             raise ValueError("collecting ahead needs the simulations in worker processes")
         self.env, self.actor, self.steps, self.noise = env, actor, steps, noise
         self.carry = carry
         """What the next collection continues from."""
-        self.collects_ahead = ahead
+        self.collect_ahead = collect_ahead
         self._ready = ready
         self._under_way: Collection | None = None
+
+    @classmethod
+    def for_run(cls, config: TrainConfig, env: TrainingEnv, learner: Learner,
+                carry: TensorDictBase | None, ready: TensorDictBase | None = None
+                ) -> BatchSource:
+        """A run's batches: ``collect_ahead`` as configured, by the learner's actor and
+        action streams, continuing from ``carry`` (and first learning from ``ready``, a
+        checkpoint's batch collected ahead)."""
+        return cls(env, learner.actor, config.rollout_steps, learner.action_noise, carry,
+                   collect_ahead=config.collect_ahead, ready=ready)
 
     def next(self) -> TensorDictBase:
         """The next batch: the one collected ahead (waiting for it if it is still under way),
@@ -68,9 +79,11 @@ class BatchSource:
         return batch
 
     def prefetch(self) -> None:
-        """With ``ahead``: starts collecting the next batch with the policy as it is now, and
-        returns at once (call it before the update). Without: nothing (:meth:`next` collects)."""
-        if not self.collects_ahead or self._under_way is not None or self._ready is not None:
+        """With ``collect_ahead``: starts collecting the next batch with the policy as it is
+        now, and returns at once. Call it after everything the next batch's collection depends
+        on is set (the learner's ``prepare``, the teacher flag) and before the update. Without:
+        nothing (:meth:`next` collects)."""
+        if not self.collect_ahead or self._under_way is not None or self._ready is not None:
             return
         assert isinstance(self.env, ParallelLaneKeepingEnv) and self.carry is not None
         self._under_way = start_collection(self.env, self.actor, self.carry, self.steps,
@@ -79,11 +92,11 @@ class BatchSource:
     def settle(self) -> None:
         """Waits for the batch under way, if any: afterwards the simulations, :attr:`carry` and
         the action streams are as its collection left them."""
-        if self._under_way is not None:
-            self._ready, self.carry = self._under_way.finish()
-            self._under_way = None
+        under_way, self._under_way = self._under_way, None
+        if under_way is not None:  # a failed collection raises once, and is not waited for again
+            self._ready, self.carry = under_way.finish()
 
-    def ahead(self) -> TensorDictBase | None:
+    def pending(self) -> TensorDictBase | None:
         """The batch collected ahead and not yet learned from (after :meth:`settle`)."""
         if self._under_way is not None:
             raise RuntimeError("a collection is under way: settle() first")

@@ -26,14 +26,17 @@ from crllk.rl.lagrange import Multiplier, multiplier_from_state
 from crllk.rl.plain import first_non_plain, tensordict_from_plain, tensordict_to_plain
 from crllk.training.build import Learner, TrainingEnv, keeps_snapshots
 
-CHECKPOINT_FORMAT = 4
+CHECKPOINT_FORMAT = 5
 """Version of the checkpoint layout written by :mod:`crllk.training.loop` (2: constraints by
 name, the task's episode state whole; 3: each simulation's action stream; 4: format 3 in
-tensors and plain containers only, read without running code)."""
-READABLE_FORMATS = (2, 3, 4)
+tensors and plain containers only, read without running code; 5: the batch collected ahead,
+``ahead``, with the simulations one batch past the episode sums when there is one)."""
+READABLE_FORMATS = (2, 3, 4, 5)
 """Formats whose policy (actor, counters, multipliers) this version reads, from a file that
 loads without running code (every kept ``policy.pt``; checkpoints of formats 2 and 3 once
-converted); only :data:`CHECKPOINT_FORMAT` resumes."""
+converted); only :data:`RESUMABLE_FORMATS` resume."""
+RESUMABLE_FORMATS = (4, 5)
+"""Formats a run resumes from: format 4 is format 5 without a batch collected ahead."""
 CONVERTED_FORMATS = {3: 4}
 """The format a checkpoint of an older one takes once converted to plain types
 (:func:`crllk.convert.convert_file`), where the newer format is the older one in plain types;
@@ -133,7 +136,7 @@ def policy_info(state: dict[str, Any]) -> dict[str, Any]:
 
 def load_checkpoint(path: str | Path, *, resuming: bool = False) -> dict[str, Any]:
     """Loads a checkpoint written by :func:`save_checkpoint` (of any of
-    :data:`READABLE_FORMATS`; only of :data:`CHECKPOINT_FORMAT` when ``resuming``)."""
+    :data:`READABLE_FORMATS`; only of :data:`RESUMABLE_FORMATS` when ``resuming``)."""
     state = read_state(path)
     check_format(path, state, resuming=resuming)
     return state  # type: ignore[return-value]
@@ -141,14 +144,14 @@ def load_checkpoint(path: str | Path, *, resuming: bool = False) -> dict[str, An
 
 def check_format(path: str | Path, state: object, *, resuming: bool = False) -> None:
     """Refuses ``state`` unless it is a checkpoint of :data:`READABLE_FORMATS` (only
-    :data:`CHECKPOINT_FORMAT` when ``resuming``).
+    :data:`RESUMABLE_FORMATS` when ``resuming``).
 
     Raises:
         ConfigError: naming ``path`` and the format.
     """
     if not isinstance(state, dict) or "format" not in state:
         raise ConfigError(path, "format", "not a crllk checkpoint")
-    readable = (CHECKPOINT_FORMAT,) if resuming else READABLE_FORMATS
+    readable = RESUMABLE_FORMATS if resuming else READABLE_FORMATS
     if state["format"] not in readable:
         raise ConfigError(path, "format", f"written in format {state['format']}, this version "
                           f"{'resumes' if resuming else 'reads'} format "

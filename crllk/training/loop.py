@@ -110,8 +110,9 @@ def train(config: TrainConfig, on_final_evaluation: FinalEvaluation | None = Non
         # as the iteration before left it, so that the run collects as the straight one
         env.teacher_active = learner.needs_teacher(state["frames"])
         exact = restore(state, learner, multipliers, episodes, env, generator)
-        batches = (batch_source(config, env, learner, resumed_carry(state), resumed_ahead(state))
-                   if exact else batch_source(config, env, learner, first_carry(env)))
+        batches = (BatchSource.for_run(config, env, learner, resumed_carry(state),
+                                       resumed_ahead(state))
+                   if exact else BatchSource.for_run(config, env, learner, first_carry(env)))
         iteration, frames, elapsed = state["iteration"], state["frames"], state["elapsed"]
         metrics.truncate_after(iteration)
         evaluations.truncate_after(iteration)
@@ -122,7 +123,7 @@ def train(config: TrainConfig, on_final_evaluation: FinalEvaluation | None = Non
         run_dir.mkdir(parents=True, exist_ok=True)
         atomic_write_text(run_dir / "config.yaml", OmegaConf.to_yaml(OmegaConf.structured(config)))
         env.teacher_active = learner.needs_teacher(0)
-        batches = batch_source(config, env, learner, first_carry(env))
+        batches = BatchSource.for_run(config, env, learner, first_carry(env))
         print(f"run directory: {run_dir}", flush=True)
     live = open_live_view(config, run_dir, constraints, learner.diagnostic_names)
 
@@ -167,7 +168,7 @@ def train(config: TrainConfig, on_final_evaluation: FinalEvaluation | None = Non
             batches.settle()  # the simulations as the batch collected ahead left them
             state = checkpoint_state(
                 config, learner, multipliers, episodes, env, generator, batches.carry,
-                ahead=batches.ahead(), iteration=iteration, frames=frames,
+                ahead=batches.pending(), iteration=iteration, frames=frames,
                 elapsed=time.perf_counter() - started)
             save_checkpoint(checkpoint_path, state)
             save_checkpoint(run_dir / POLICY_FILE, policy_state(state))
@@ -205,15 +206,6 @@ def learn(config: TrainConfig, env: TrainingEnv, learner: Learner,
     shape_signals(batch, config, env.config)
     losses = learner.update(batch, generator)
     return batch, finished, losses
-
-
-def batch_source(config: TrainConfig, env: TrainingEnv, learner: Learner,
-                 carry: TensorDictBase | None, ready: TensorDictBase | None = None
-                 ) -> BatchSource:
-    """The run's :class:`BatchSource`: ``collect_ahead`` as configured, continuing from
-    ``carry`` (and first learning from ``ready``, a checkpoint's batch collected ahead)."""
-    return BatchSource(env, learner.actor, config.rollout_steps, learner.action_noise, carry,
-                       ahead=config.collect_ahead, ready=ready)
 
 
 def prepare_run_dir(config: TrainConfig, run_dir: Path, checkpoint_path: Path) -> bool:
