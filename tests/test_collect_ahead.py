@@ -113,3 +113,49 @@ def test_the_bench_times_state_collecting_ahead_where_it_can(overrides, labels):
 
     configs = training_bench_configs("small_loop", overrides)
     assert [c.obs.name + (", collect_ahead" if c.collect_ahead else "") for c in configs] == labels
+
+
+def test_the_collect_ahead_trial_rows_are_their_validation_evaluations():
+    """The Scaling out page's trial: each run's 400 validation episodes, sampled and deployed,
+    the sequential and the collecting-ahead run of each map and seed; the prose's largest
+    difference between the loops."""
+    import json
+    from pathlib import Path
+
+    from docs_pages import page
+
+    runs = Path(__file__).resolve().parents[1] / "results/runs/state"
+    text = page("scaling-out.md")
+    largest = (0.0, "")
+
+    def cell(document: dict) -> str:
+        summary, episodes = document["summary"], document["episodes"]
+        hits = int(sum(e["cost_collision"] for e in episodes))
+        assert len(episodes) == 400 and document["evaluation"]["seed"] == 1_000_000
+        return (f"{summary['J_clane']:.3f} / {summary['J_coll']:.4f} ({hits} of 400) / "
+                f"{summary['J_R']:.2f}")
+
+    for task in ("small_loop", "zigzag"):
+        for seed in (0, 1):
+            found = {}
+            for arm, label in (("CRLLK-D", "sequential"), ("CRLLK-D-ahead", "collecting ahead")):
+                run = runs / task / f"{arm}-a0.5-seed{seed}"
+                documents = [json.loads((run / f"{name}.json").read_text())
+                             for name in ("val400", "val400-deployed")]
+                assert documents[1]["evaluation"]["deployed"] == "expected_duty"
+                assert f"| `{task}`, seed {seed}, {label} | {cell(documents[0])} | " \
+                       f"{cell(documents[1])} |" in text
+                found[arm] = [d["summary"]["J_clane"] for d in documents]
+                assert max(found[arm]) < 0.5
+                assert all(d["summary"]["J_coll"] == 0 for d in documents)
+            assert ("collect_ahead: true" in (runs / task / f"CRLLK-D-ahead-a0.5-seed{seed}"
+                                               / "config.yaml").read_text())
+            for which in (0, 1):
+                gap = abs(found["CRLLK-D"][which] - found["CRLLK-D-ahead"][which])
+                if gap > largest[0]:
+                    largest = (gap, f"`{task}` seed {seed}'s "
+                               f"{'deployed' if which else 'sampled'} policy (J_clane "
+                               f"{found['CRLLK-D-ahead'][which]:.3f} dm collecting ahead, against "
+                               f"{found['CRLLK-D'][which]:.3f})")
+    assert "the largest difference between the two loops is " + largest[1] in " ".join(
+        text.split())
