@@ -953,3 +953,45 @@ def test_the_real_map_page_quotes_the_retrained_and_the_replaced_runs():
     assert f"sampled (J_coll {pair(new, 'test')}, against {pair(old, 'test')} before)" in text
     assert (f"deployed ({pair(new, 'test-mode')}, against the former mode's "
             f"{pair(old, 'test-mode')})") in text
+
+
+def test_the_twice_the_budget_rows_are_their_validation_evaluations():
+    """The CRLLK-C budget trial: each run's sampled and expected-action validation episodes,
+    its late training J_coll and final λ_coll; the prose's counts."""
+    import csv
+
+    root = REPO / "results/runs/pixels/obstacle_loop"
+
+    def late(run: str, low: int, high: int) -> tuple[float, float]:
+        with (root / run / "metrics.csv").open() as handle:
+            rows = list(csv.DictReader(handle))
+        values = [float(r["J_coll"]) for r in rows
+                  if low <= int(r["iteration"]) <= high and r["J_coll"] not in ("", "nan")]
+        return sum(values) / len(values), float(rows[-1]["lambda_collision"])
+
+    hits = {}
+    for label, run, sampled, low, high, frames in [
+            ("default (500,000 frames), seed 0", "CRLLK-C-a0.5-seed0", "eval-400", 400, 489,
+             500_000),
+            ("default (500,000 frames), seed 2", "CRLLK-C-a0.5-seed2", "val400", 400, 489,
+             500_000),
+            ("1,000,000 frames, seed 0", "CRLLK-C-1M-a0.5-seed0", "val400", 888, 977, 1_000_000),
+            ("1,000,000 frames, seed 2", "CRLLK-C-1M-a0.5-seed2", "val400", 888, 977,
+             1_000_000)]:
+        assert f"total_frames: {frames}" in (root / run / "config.yaml").read_text()
+        documents = [json.loads((root / run / f"{name}.json").read_text())
+                     for name in (sampled, "val400-deployed")]
+        assert documents[1]["evaluation"]["deployed"] == "expected_action"
+        assert all(d["evaluation"]["seed"] != TEST_SEED for d in documents)
+        j_coll, multiplier = late(run, low, high)
+        assert (f"| {label} | {_val400_cell(documents[0])} | {_val400_cell(documents[1])} | "
+                f"{j_coll:.3f} | {multiplier:.1f} |") in FINDINGS
+        hits[run] = [int(sum(e["cost_collision"] for e in d["episodes"])) for d in documents]
+    text = " ".join(FINDINGS.split())
+    old, new = hits["CRLLK-C-a0.5-seed2"], hits["CRLLK-C-1M-a0.5-seed2"]
+    assert (f"its sampled policy ended {new[0]} of 400 validation episodes on an obstacle or off "
+            f"the road, against {old[0]} at 500,000 frames, and its expected action {new[1]}, "
+            f"against {old[1]}") in text
+    old, new = hits["CRLLK-C-a0.5-seed0"], hits["CRLLK-C-1M-a0.5-seed0"]
+    assert (f"({new[0]} sampled endings against {old[0]}, its expected action {new[1]} against "
+            f"{old[1]})") in text
