@@ -949,10 +949,15 @@ def test_the_real_map_page_quotes_the_retrained_and_the_replaced_runs():
         return f"{j_coll(where, 0, name)} and {j_coll(where, 1, name)}"
 
     text = prose("results/realmaps.md")
+    former = json.loads((runs / "replaced/ETH_small_intersect/CRLLK-D-a0.5-seed0/test-mode.json"
+                         ).read_text())
+    assert (f"(the former deployed policy of seed 0 missed α2: J_coll "
+            f"{former['summary']['J_coll']:.3f}, {former['terminations']['off_road']} episodes "
+            "off the road)") in text
     new, old = "regress_4way_adam", "replaced/regress_4way_adam"
     assert f"sampled (J_coll {pair(new, 'test')}, against {pair(old, 'test')} before)" in text
-    assert (f"deployed ({pair(new, 'test-mode')}, against the former mode's "
-            f"{pair(old, 'test-mode')})") in text
+    assert (f"deployed ({pair(new, 'test-mode')}, against {pair(old, 'test-mode')} for the "
+            "former deployed policy") in text
 
 
 def test_the_twice_the_budget_rows_are_their_validation_evaluations():
@@ -992,6 +997,16 @@ def test_the_twice_the_budget_rows_are_their_validation_evaluations():
     assert (f"its sampled policy ended {new[0]} of 400 validation episodes on an obstacle or off "
             f"the road, against {old[0]} at 500,000 frames, and its expected action {new[1]}, "
             f"against {old[1]}") in text
+    deployed = json.loads((root / "CRLLK-C-1M-a0.5-seed2/val400-deployed.json").read_text())
+    upper = wilson_interval(new[1], 400)[1]
+    assert (f"(J_coll {deployed['summary']['J_coll']:.4f}: within α2 on the point estimate, not "
+            f"at the 95 % upper bound, {upper:.3f})") in text
+    clane = [json.loads((root / run / "val400.json").read_text())["summary"]["J_clane"]
+             for run in ("CRLLK-C-1M-a0.5-seed2", "CRLLK-C-a0.5-seed2")]
+    assert f"at a higher J_clane ({clane[0]:.3f} dm against {clane[1]:.3f})" in text
     old, new = hits["CRLLK-C-a0.5-seed0"], hits["CRLLK-C-1M-a0.5-seed0"]
     assert (f"({new[0]} sampled endings against {old[0]}, its expected action {new[1]} against "
             f"{old[1]})") in text
+    lates = [late(run, low, high)[0] for run, low, high in
+             (("CRLLK-C-1M-a0.5-seed0", 888, 977), ("CRLLK-C-a0.5-seed0", 400, 489))]
+    assert f"collided more late on ({lates[0]:.3f} per episode against {lates[1]:.3f})" in text
