@@ -781,7 +781,8 @@ def test_fleet_at_a_tiny_budget(tmp_path):
                         .read_text()) for _ in range(2)]
     assert [d["evaluations_made"] for d in again] == [len(fleet_files), 0]
     assert [d["runs_trained"] for d in again] == [0, 0]
-    assert again[0]["wall_s"] > again[1]["wall_s"] + 1.0  # a fleet evaluation takes seconds
+    # a tiny fleet evaluation takes about a second on an idle machine: no margin is assumed
+    assert again[0]["wall_s"] > again[1]["wall_s"]
 
 
 def test_fleet_without_its_agents_fails_clearly(tmp_path):
