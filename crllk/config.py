@@ -229,15 +229,15 @@ class TrainConfig:
     stay in the main process. Simulation i spawns from the same seed and samples its actions
     from its own stream whatever the number of workers, so a run with several workers
     collects exactly what it would with one, and resumes exactly from its checkpoints (with
-    any number of workers; with collect_ahead, two or more). With collector=ray: the remote
-    collectors."""
+    any number of workers). With collect_ahead, workers=1 is one worker process too. With
+    collector=ray: the remote collectors."""
     collect_ahead: bool = False
     """The workers collect the next batch while this process updates the networks on the one
     before (:mod:`crllk.training.batches`), with the policy as it was before that update: each
     batch is one update older than the policy that learns from it (PPO's ratios use the
-    probabilities stored with each action, so they stay exact). Needs workers of
-    collector=local (workers ≥ 2), also to resume such a run (it keeps this setting from its
-    config.yaml). It changes what is learned, so runs with and without it differ."""
+    probabilities stored with each action, so they stay exact). Needs collector=local; with
+    workers=1 the simulations go to one worker process. It changes what is learned, so runs
+    with and without it differ."""
     collector: str = setting("local", check=one_of("local", "ray"))
     """Where the simulations run. local: on this machine (workers processes). ray: in workers
     remote collectors of TorchRL's RayCollector (the cluster extra), num_envs/workers
@@ -300,11 +300,9 @@ class TrainConfig:
             yield "workers", (f"must divide num_envs ({self.num_envs}) into equal shares, "
                               f"got {self.workers} (obs=pixels and obs=state set 2; workers=1 "
                               "steps them in this process)")
-        if self.collect_ahead and (self.workers < 2 or self.collector != "local"):
+        if self.collect_ahead and self.collector != "local":
             yield "collect_ahead", ("needs the simulations in worker processes of this machine "
-                                    f"(workers ≥ 2, collector=local), got workers={self.workers}"
-                                    f", collector={self.collector} (a run that collects ahead "
-                                    "resumes with workers ≥ 2 too)")
+                                    f"(collector=local), got collector={self.collector}")
         if self.task_file and not Path(self.task_file).exists():
             yield "task_file", f"no such file: {self.task_file}"
 

@@ -1,6 +1,6 @@
 """``collect_ahead``: the workers collect the next batch during the update, with the policy
-as it was before it; a stopped run resumes exactly, and the setting is refused where no
-worker processes collect."""
+as it was before it; a stopped run resumes exactly, with any number of workers, and the
+setting is refused with remote collectors."""
 
 from __future__ import annotations
 
@@ -93,22 +93,29 @@ def test_collecting_ahead_learns_from_older_batches(tmp_path):
     assert rows[0][1]["loss_objective"] != rows[1][1]["loss_objective"]
 
 
-@pytest.mark.parametrize("overrides", [["workers=1"], ["collector=ray", "workers=2"]])
-def test_collecting_ahead_without_local_workers_is_refused(overrides):
-    """One line naming the setting: one process, or remote collectors, cannot collect during
-    the update."""
+def test_collecting_ahead_with_remote_collectors_is_refused():
+    """One line naming the setting: remote collectors cannot collect during the update."""
     with pytest.raises(ConfigError) as error:
-        validate(compose_config(["obs=state", "collect_ahead=true", *overrides]))
+        validate(compose_config(["obs=state", "collect_ahead=true", "collector=ray",
+                                 "workers=2"]))
     assert "collect_ahead: needs the simulations in worker processes" in str(error.value)
+
+
+def test_one_worker_collecting_ahead_learns_what_two_do(tmp_path):
+    """With workers=1 the simulations go to one worker process, which collects during the
+    update as two do: the same run bit for bit (each simulation samples from its own stream)."""
+    one = run_in_process(tmp_path / "one", 2, [*AHEAD, "workers=1"], frames_per_iteration=FRAMES)
+    two = run_in_process(tmp_path / "two", 2, AHEAD, frames_per_iteration=FRAMES)
+    assert_same_runs(two, one, 2, ignore=["workers"])
 
 
 @pytest.mark.parametrize(("overrides", "labels"), [
     ([], ["state", "state, collect_ahead", "pixels"]),
-    (["workers=1"], ["state", "pixels"]),
+    (["workers=1"], ["state", "state, collect_ahead", "pixels"]),
     (["collect_ahead=true"], ["state, collect_ahead", "pixels, collect_ahead"])])
 def test_the_bench_times_state_collecting_ahead_where_it_can(overrides, labels):
     """``python -m crllk.bench --training`` adds the state figure collecting ahead, unless the
-    overrides decide collect_ahead themselves or leave one process."""
+    overrides decide collect_ahead themselves."""
     from crllk.bench.cli import training_bench_configs
 
     configs = training_bench_configs("small_loop", overrides)

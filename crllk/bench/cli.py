@@ -143,7 +143,7 @@ def main(argv: Sequence[str] | None = None) -> None:
 
 def training_bench_configs(task: str, overrides: Sequence[str]) -> list[TrainConfig]:
     """The trainer configurations of the ``--training`` figures, state, state collecting
-    ahead (``collect_ahead=true``, unless the overrides decide it or leave no workers) and
+    ahead (``collect_ahead=true``, unless the overrides decide it) and
     pixels (checked before anything is measured).
 
     Raises:
@@ -158,7 +158,7 @@ def training_bench_configs(task: str, overrides: Sequence[str]) -> list[TrainCon
                           "collector=ray with --workers")
     settings = [["obs=pixels"]]
     decided = any(o.split("=", 1)[0].lstrip("+") == "collect_ahead" for o in overrides)
-    if not decided and state.workers >= 2:
+    if not decided:
         settings.insert(0, ["obs=state", "collect_ahead=true"])
     return [state, *(bench_config([f"task={task}", *setting, *overrides])
                      for setting in settings)]

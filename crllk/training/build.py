@@ -45,8 +45,9 @@ def build_env(config: TrainConfig, *, num_envs: int, seed: int,
 
 
 def build_training_env(config: TrainConfig) -> TrainingEnv:
-    """The ``num_envs`` training simulations: stepped in this process (``workers=1``), split
-    among ``workers`` processes (:class:`ParallelLaneKeepingEnv`), or among ``workers`` remote
+    """The ``num_envs`` training simulations: stepped in this process (``workers=1`` without
+    ``collect_ahead``), split among ``workers`` processes (:class:`ParallelLaneKeepingEnv`;
+    one worker process with ``workers=1`` and ``collect_ahead``), or among ``workers`` remote
     collectors (``collector=ray``; started by :func:`build_run`). Simulation ``i`` spawns from
     the same seed every way.
 
@@ -65,7 +66,7 @@ def build_training_env(config: TrainConfig) -> TrainingEnv:
                                            address=config.ray_address, seed=config.seed)
         finally:
             spec_env.close()
-    if config.workers == 1:
+    if config.workers == 1 and not config.collect_ahead:
         return build_env(config, num_envs=config.num_envs, seed=config.seed, training=True)
     return ParallelLaneKeepingEnv(worker_env, shares, num_threads=config.threads)
 
