@@ -978,9 +978,12 @@ def test_the_twice_the_budget_rows_are_their_validation_evaluations():
     for label, run, sampled, low, high, frames in [
             ("default (500,000 frames), seed 0", "CRLLK-C-a0.5-seed0", "eval-400", 400, 489,
              500_000),
+            ("default (500,000 frames), seed 1", "CRLLK-C-a0.5-seed1", "eval-400", 400, 489,
+             500_000),
             ("default (500,000 frames), seed 2", "CRLLK-C-a0.5-seed2", "val400", 400, 489,
              500_000),
             ("1,000,000 frames, seed 0", "CRLLK-C-1M-a0.5-seed0", "val400", 888, 977, 1_000_000),
+            ("1,000,000 frames, seed 1", "CRLLK-C-1M-a0.5-seed1", "val400", 888, 977, 1_000_000),
             ("1,000,000 frames, seed 2", "CRLLK-C-1M-a0.5-seed2", "val400", 888, 977,
              1_000_000)]:
         assert f"total_frames: {frames}" in (root / run / "config.yaml").read_text()
@@ -1010,3 +1013,30 @@ def test_the_twice_the_budget_rows_are_their_validation_evaluations():
     lates = [late(run, low, high)[0] for run, low, high in
              (("CRLLK-C-1M-a0.5-seed0", 888, 977), ("CRLLK-C-a0.5-seed0", 400, 489))]
     assert f"collided more late on ({lates[0]:.3f} per episode against {lates[1]:.3f})" in text
+    old, new = hits["CRLLK-C-a0.5-seed1"], hits["CRLLK-C-1M-a0.5-seed1"]
+    assert (f"got worse: {new[0]} sampled endings against {old[0]}, and its expected action "
+            f"{new[1]} against {old[1]}") in text
+
+    def sampled(run: str) -> str:
+        name = "eval-400" if run in ("CRLLK-C-a0.5-seed0", "CRLLK-C-a0.5-seed1") else "val400"
+        value = json.loads((root / run / f"{name}.json").read_text())["summary"]["J_coll"]
+        assert value > 0.02
+        return f"{value:.3f}"
+
+    longer = ", ".join(sampled(f"CRLLK-C-1M-a0.5-seed{s}") for s in (0, 1)) + " and " + \
+        sampled("CRLLK-C-1M-a0.5-seed2")
+    shorter = ", ".join(sampled(f"CRLLK-C-a0.5-seed{s}") for s in (0, 1)) + " and " + \
+        sampled("CRLLK-C-a0.5-seed2")
+    assert (f"misses α2 on every seed at either budget (J_coll {longer} at 1,000,000 frames; "
+            f"{shorter} at 500,000)") in text
+
+    def windows(run: str, first: int, count: int) -> str:
+        values = [f"{late(run, low, low + 99)[0]:.3f}"
+                  for low in range(first, first + 100 * count, 100)]
+        return ", ".join(values[:-1]) + " and " + values[-1]
+
+    assert (f"Seed 1's mean training J_coll per 100 iterations fell to "
+            f"{windows('CRLLK-C-1M-a0.5-seed1', 401, 2)} over iterations 401–600, then rose "
+            f"again to {windows('CRLLK-C-1M-a0.5-seed1', 601, 4)}") in text
+    assert (f"seed 0's went {windows('CRLLK-C-1M-a0.5-seed0', 301, 5)} over iterations "
+            "301–800") in text
