@@ -54,6 +54,40 @@ def test_the_state_page_s_comparisons_are_the_state_tables():
         assert sentence in text
 
 
+def test_the_state_page_s_obstacle_loop_figures_are_the_runs():
+    """From state on obstacle_loop: the discrete agents' test J_coll, sampled and deployed,
+    CRLLK-D's final λ_coll, and the replaced former-default runs' figures."""
+    runs = REPO / "results/runs/state/obstacle_loop"
+
+    def document(run: Path, name: str) -> dict:
+        return json.loads((run / f"{name}.json").read_text())
+
+    def j_coll(runs_: list[Path], name: str) -> list[float]:
+        return [document(run, name)["summary"]["J_coll"] for run in runs_]
+
+    def listed(values: list[float], digits: int = 3) -> str:
+        words = [f"{value:.{digits}f}" for value in values]
+        return ", ".join(words[:-1]) + " and " + words[-1]
+
+    text = prose("results/state.md")
+    ours = [runs / f"CRLLK-D-a0.5-seed{seed}" for seed in (0, 1, 2)]
+    sampled, deployed = j_coll(ours, "test"), j_coll(ours, "test-mode")
+    assert max(sampled + deployed) <= 0.02
+    multipliers = [document(run, "test")["source"]["multipliers"]["collision"] for run in ours]
+    assert (f"CRLLK-D's sampled J_coll, {listed(sampled)} on seeds 0, 1 and 2 (its learned "
+            f"λ_coll ended at {listed(multipliers, 1)})") in text
+    assert f"collides less ({listed(deployed)})" in text
+    fixed = [runs / f"PPO-D-a0.5-seed{seed}" for seed in (0, 1)]
+    assert min(j_coll(fixed, "test")) > 0.02
+    assert (f"misses α2 sampled on both seeds (J_coll {listed(j_coll(fixed, 'test'))}; "
+            f"deployed {listed(j_coll(fixed, 'test-mode'))})") in text
+    former = [runs.parent / "replaced/obstacle_loop" / f"CRLLK-D-a0.5-seed{seed}"
+              for seed in (0, 1)]
+    assert (f"({listed(sampled[:2])} on seeds 0 and 1, against "
+            f"{listed(j_coll(former, 'test'))})") in text
+    assert f"collided {listed(j_coll(former, 'test-mode'))}" in text
+
+
 def test_every_farther_in_the_documentation_is_checked():
     """A new "N % farther" anywhere fails until a test writes it from the results."""
     checked = sum(len(re.findall(r"\d+ % farther", s)) for s in _state_sentences())
