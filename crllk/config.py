@@ -299,7 +299,7 @@ class TrainConfig:
         if self.num_envs % self.workers:
             yield "workers", (f"must divide num_envs ({self.num_envs}) into equal shares, "
                               f"got {self.workers} (obs=pixels and obs=state set 2; workers=1 "
-                              "steps them in this process)")
+                              "steps them in this process, without collect_ahead)")
         if self.collect_ahead and self.collector != "local":
             yield "collect_ahead", ("needs the simulations in worker processes of this machine "
                                     f"(collector=local), got collector={self.collector}")

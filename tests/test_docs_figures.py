@@ -13,6 +13,8 @@ from pathlib import Path
 import pytest
 from docs_pages import DOCS, page, pages, prose
 
+from crllk.evaluation.intervals import wilson_interval
+
 REPO = Path(__file__).resolve().parents[1]
 STATE = REPO / "results" / "state"
 TABLES = {"small_loop": "table1.json", "zigzag": "table_zigzag.json",
@@ -83,9 +85,19 @@ def test_the_state_page_s_obstacle_loop_figures_are_the_runs():
             f"deployed {listed(j_coll(fixed, 'test-mode'))})") in text
     former = [runs.parent / "replaced/obstacle_loop" / f"CRLLK-D-a0.5-seed{seed}"
               for seed in (0, 1)]
-    assert (f"({listed(sampled[:2])} on seeds 0 and 1, against "
-            f"{listed(j_coll(former, 'test'))})") in text
-    assert f"collided {listed(j_coll(former, 'test-mode'))}" in text
+
+    def endings(runs_: list[Path], name: str) -> str:
+        counts = [int(sum(e["cost_collision"] for e in document(run, name)["episodes"]))
+                  for run in runs_]
+        return f"{counts[0]} and {counts[1]}"
+
+    assert (f"{endings(ours[:2], 'test')} of 400 episodes on seeds 0 and 1, against "
+            f"{endings(former, 'test')}") in text
+    upper = [wilson_interval(round(400 * j), 400)[1] for j in j_coll(former, "test")]
+    assert upper[0] > 0.02 >= upper[1]  # "the former seed 1 held α2 at the 95 % upper bound"
+    assert all(wilson_interval(round(400 * j), 400)[1] > 0.02 for j in sampled)
+    assert (f"ended {endings(former, 'test-mode')} of 400 episodes on an obstacle or off the "
+            "road") in text
 
 
 def test_every_farther_in_the_documentation_is_checked():

@@ -1038,5 +1038,11 @@ def test_the_twice_the_budget_rows_are_their_validation_evaluations():
     assert (f"Seed 1's mean training J_coll per 100 iterations fell to "
             f"{windows('CRLLK-C-1M-a0.5-seed1', 401, 2)} over iterations 401–600, then rose "
             f"again to {windows('CRLLK-C-1M-a0.5-seed1', 601, 4)}") in text
-    assert (f"seed 0's went {windows('CRLLK-C-1M-a0.5-seed0', 301, 5)} over iterations "
-            "301–800") in text
+    assert (f"seed 0's went {windows('CRLLK-C-1M-a0.5-seed0', 301, 7)} over iterations "
+            "301–977") in text
+    assert f"Seed 2's fell to {late('CRLLK-C-1M-a0.5-seed2', 901, 977)[0]:.3f} only" in text
+    with (root / "CRLLK-C-1M-a0.5-seed1" / "metrics.csv").open() as handle:
+        multipliers = {int(r["iteration"]): float(r["lambda_collision"])
+                       for r in csv.DictReader(handle)}
+    assert (f"its λ_coll hardly moved ({multipliers[401]:.1f} at iteration 401, "
+            f"{multipliers[601]:.1f} at 601, {multipliers[901]:.1f} at 901)") in text
