@@ -369,8 +369,9 @@ def test_the_traffic_sentence_is_what_the_runs_show():
     traffic = stoppable["traffic_loop"]
     assert len(traffic["satisfied"]) == 3 and all(traffic["satisfied"])
     assert len(traffic["mode"]["satisfied"]) == 3 and all(traffic["mode"]["satisfied"])
-    assert "On `pedestrian_loop` it still misses α2 on every seed: it hits crossing duckies in " \
-        "6–10 % of episodes, and one seed also leaves the road in about one episode in ten" in text
+    hits_text = ("On `pedestrian_loop` it still misses α2 on every seed: it hits crossing "
+                 "duckies in ")
+    assert hits_text in text
     pedestrian = stoppable["pedestrian_loop"]
     bound = document["tasks"]["pedestrian_loop"]["thresholds"]["collision"]
     assert all(v > bound for v in pedestrian["J_coll"]["values"])
@@ -378,12 +379,16 @@ def test_the_traffic_sentence_is_what_the_runs_show():
     entries = (pedestrian, pedestrian["mode"])
     hit_shares = [c["collisions_by_kind"].get("pedestrian", 0) / c["episodes"]
                   for entry in entries for c in entry["community"]]
-    assert (round(100 * min(hit_shares)), round(100 * max(hit_shares))) == (6, 10)
+    assert (f"{hits_text}{round(100 * min(hit_shares))}–{round(100 * max(hit_shares))} % of "
+            "episodes, and one seed also leaves the road in") in text
     off_road = [[t.get("off_road", 0) / sum(t.values()) for t in entry["terminations"]]
                 for entry in entries]
     leaving = [k for k in range(3) if all(0.05 < shares[k] < 0.15 for shares in off_road)]
     assert len(leaving) == 1
     assert all(shares[k] < 0.01 for shares in off_road for k in range(3) if k not in leaving)
+    seed_shares = [round(100 * shares[leaving[0]]) for shares in off_road]
+    assert (f"leaves the road in {min(seed_shares)}–{max(seed_shares)} % of them (sampled and "
+            "deployed)") in text
     terminations = pedestrian["terminations"][leaving[0]]
     results_page = " ".join(page("results/traffic.md").split())
     assert (f"on seed {leaving[0]}, by leaving the road ({terminations['off_road']} of its "
