@@ -75,7 +75,7 @@ def test_workers_that_do_not_divide_num_envs_are_refused(tmp_path):
     message = str(error.value)
     assert message == ("override: workers: must divide num_envs (2) into equal shares, "
                        "got 3 (obs=pixels and obs=state set 2; workers=1 steps them in this "
-                       "process)"), message
+                       "process, without collect_ahead)"), message
     assert not (tmp_path / "run").exists()
 
 

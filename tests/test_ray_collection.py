@@ -42,7 +42,7 @@ RAY_RUN_S = 600
 @pytest.mark.parametrize(("overrides", "message"), [
     (["collector=ray", "workers=3"],
      "override: workers: must divide num_envs (2) into equal shares, got 3 (obs=pixels and "
-     "obs=state set 2; workers=1 steps them in this process)"),
+     "obs=state set 2; workers=1 steps them in this process, without collect_ahead)"),
     (["ray_address=127.0.0.1:6379"],
      "override: ray_address: is only used with collector=ray, got collector=local"),
     (["collector=ray", "ray_address=head"],
