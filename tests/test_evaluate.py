@@ -253,6 +253,9 @@ def test_cost_critic_fit_over_whole_batches(tiny_run, tmp_path):
     fit = json.loads((run / "cost-critic-collision.json").read_text())
     assert fit["frames"] == 2 * 16 and fit["cost_steps"] >= 0 and fit["constraint"] == "collision"
     assert -1.0 <= fit["correlation"] <= 1.0 or np.isnan(fit["correlation"])
+    assert sum(row["steps"] for row in fit["calibration"]) == fit["frames"]
+    assert [(row["from"], row["to"]) for row in fit["lead"]] == [tuple(w) for w in
+                                                                 cost_critics.LEAD_WINDOWS]
     for argv, message in (([str(tmp_path / "none")], "no such run directory"),
                           ([str(run), "--constraint", "speed"], "is not a constraint")):
         completed = subprocess.run([sys.executable, "-m", "crllk.analysis.cost_critics", *argv],

@@ -1046,3 +1046,34 @@ def test_the_twice_the_budget_rows_are_their_validation_evaluations():
                        for r in csv.DictReader(handle)}
     assert (f"its λ_coll hardly moved ({multipliers[401]:.1f} at iteration 401, "
             f"{multipliers[601]:.1f} at 601, {multipliers[901]:.1f} at 901)") in text
+
+
+COLLISION_CRITIC_RUNS = (("default (500,000 frames), seed 2", "CRLLK-C-a0.5-seed2"),
+                         ("1,000,000 frames, seed 1", "CRLLK-C-1M-a0.5-seed1"))
+
+
+def test_the_collision_critic_lead_table_is_the_runs_calibration():
+    """Each row: the run's ``cost-critic-collision.json`` (60 batches, the training cost
+    discount); the prose's totals and loss ratios are those files' and ``metrics.csv``'s."""
+    import csv
+
+    root = REPO / "results/runs/pixels/obstacle_loop"
+    text = " ".join(FINDINGS.split())
+    collisions = frames = above = 0
+    ratios = []
+    for label, run in COLLISION_CRITIC_RUNS:
+        fit = json.loads((root / run / "cost-critic-collision.json").read_text())
+        assert fit["frames"] == 61_440 and fit["cost_gamma"] == 0.95
+        cells = " | ".join(f"{w['predicted']:.3f} → {w['realised']:.3f}" for w in fit["lead"])
+        assert f"| {label} | {fit['cost_steps']} | {cells} |" in FINDINGS.splitlines()
+        collisions, frames = collisions + fit["cost_steps"], frames + fit["frames"]
+        above += sum(b["steps"] for b in fit["calibration"] if b["from"] is not None
+                     and b["from"] >= 0.1)
+        with (root / run / "metrics.csv").open() as handle:
+            rows = list(csv.DictReader(handle))
+        rows = rows[len(rows) // 2:]  # the second half of the run
+        ratios.append(sum(float(r["loss_cost_critic"]) for r in rows)
+                      / sum(float(r["loss_critic"]) for r in rows))
+    assert f"(one step of {frames:,} above)" in text and above == 1
+    assert f"{ratios[0]:.0f} and {ratios[1]:.0f} times the reward critic's" in text
+    assert f"({collisions} of the {frames:,} collected steps carry a collision)" in text
