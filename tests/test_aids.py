@@ -29,39 +29,36 @@ def test_aids_runs_the_default_and_each_variant_on_its_maps():
     assert EXPERIMENTS["aids"] is aids
     names = {(s.task, s.directory(Path("r")).name) for s in specs}
     assert len(specs) == len(names) == 10
-    # from pixels on obstacle_loop every variant keeps the former curve weight (its runs'
-    # directories say -curve1)
     assert names == {(task, f"CRLLK-D{tag}-a0.5-seed{seed}") for seed in (0, 1)
-                     for task, tag in [("obstacle_loop", "-curve1"), ("small_loop", ""),
-                                       ("obstacle_loop", "-noencounters-curve1"),
-                                       ("obstacle_loop", "-pixelcritics-curve1"),
+                     for task, tag in [("obstacle_loop", ""), ("small_loop", ""),
+                                       ("obstacle_loop", "-noencounters"),
+                                       ("obstacle_loop", "-pixelcritics"),
                                        ("small_loop", "-pixelcritics")]}
     extras = {(s.task, s.tag): s.extra for s in specs}
-    pinned = ("encounter_curve_weight=1",)
-    assert extras == {("obstacle_loop", "-curve1"): pinned, ("small_loop", ""): (),
-                      ("obstacle_loop", "-noencounters-curve1"): ("encounters=0", *pinned),
-                      ("obstacle_loop", "-pixelcritics-curve1"):
-                          ("model.critic_input=observation", *pinned),
+    assert extras == {("obstacle_loop", ""): (), ("small_loop", ""): (),
+                      ("obstacle_loop", "-noencounters"): ("encounters=0",),
+                      ("obstacle_loop", "-pixelcritics"): ("model.critic_input=observation",),
                       ("small_loop", "-pixelcritics"): ("model.critic_input=observation",)}
     assert {s.seed for s in aids_specs(Settings(seeds=(3,)))} == {3}
-    # from state the critics read the state anyway: no pixel-critics runs; no pin either
+    # from state the critics read the state anyway: no pixel-critics runs
     assert {s.tag for s in aids_specs(Settings(obs="state"))} == {"", "-noencounters"}
     commands = sweep_commands(specs, Settings())
-    assert len(commands) == 5  # the pinned runs sweep apart from the others
-    assert sum("encounters=0" in c and "task=obstacle_loop" in c for c in commands) == 1
-    assert all(("encounter_curve_weight=1" in c) == ("task=obstacle_loop" in c)
-               for c in commands)
+    assert len(commands) == 3  # one sweep per set of overrides, both maps in one
+    assert sum("encounters=0" in c for c in commands) == 1
+    assert not any("encounter_curve_weight" in c for c in commands)
 
 
-def test_teacher_runs_are_pinned_on_obstacle_loop():
+def test_teacher_runs_are_the_default_s_and_two_variants_on_each_map():
+    """On both maps the tables' default runs, then the annealed and teacherless variants: the
+    ablation runs the trainer's configuration, the same on every map."""
     specs = teacher_specs(Settings())
     assert len(specs) == 12
-    pinned = ("encounter_curve_weight=1",)
-    assert specs[:3] == [RunSpec("CRLLK-D", "obstacle_loop", 0, tag="-curve1", extra=pinned),
-                         RunSpec("CRLLK-D", "obstacle_loop", 1, tag="-curve1", extra=pinned),
-                         RunSpec("CRLLK-D", "obstacle_loop", 0, tag="-teacher0-curve1",
-                                 extra=("teacher.final=0", "teacher.frames=400000", *pinned))]
+    assert specs[:3] == [RunSpec("CRLLK-D", "obstacle_loop", 0),
+                         RunSpec("CRLLK-D", "obstacle_loop", 1),
+                         RunSpec("CRLLK-D", "obstacle_loop", 0, tag="-teacher0",
+                                 extra=("teacher.final=0", "teacher.frames=400000"))]
     assert RunSpec("CRLLK-D", "small_loop", 0) in specs
+    assert not any("encounter_curve_weight" in o for s in specs for o in s.extra)
     assert list(TEACHER_VARIANTS) == ["floor 0.3 (default)", "annealed to 0 by 400k frames",
                                       "no teacher"]
 

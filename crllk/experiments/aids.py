@@ -15,7 +15,7 @@ Markdown) is shared with :mod:`crllk.experiments.teacher`."""
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -59,24 +59,6 @@ def variants(*items: Variant) -> dict[str, Variant]:
 
 
 @dataclass(frozen=True)
-class Pin:
-    """Settings an ablation's runs on one map keep where the trainer's default changed after
-    they were trained: every variant there trains with them, its runs named with ``tag``."""
-
-    tag: str
-    overrides: tuple[str, ...]
-    why: str
-    """What the pinned settings were, for the documents."""
-
-
-CURVE_WEIGHT_PIN = Pin("-curve1", ("encounter_curve_weight=1",),
-                       "trained before the discrete agents' encounter_curve_weight became 4: "
-                       "every variant with the former default, 1")
-"""The ablations' runs on ``obstacle_loop`` (the former default:
-:data:`crllk.experiments.provenance.FORMER_DEFAULTS`)."""
-
-
-@dataclass(frozen=True)
 class Ablation:
     """An experiment of CRLLK-D variants: its runs, and ``<results>/<name>.{json,md}``."""
 
@@ -89,27 +71,14 @@ class Ablation:
     """The first column of the Markdown tables."""
     baseline: str | None = None
     """The variant the others are compared with, one "what it buys" line each (None: none)."""
-    pins: Mapping[str, Pin] = field(default_factory=dict)
-    """Per map, settings every variant keeps there (:class:`Pin`), from pixels."""
-
-    def pin(self, task: str, obs: str) -> Pin | None:
-        """The settings the runs on ``task`` keep, if any (the pins are of pixel runs)."""
-        return self.pins.get(task) if obs == "pixels" else None
-
-    def tag(self, variant: Variant, task: str, obs: str) -> str:
-        """The run-directory tag of ``variant`` on ``task``: its own, then its pin's."""
-        pin = self.pin(task, obs)
-        return variant.tag + (pin.tag if pin else "")
 
     def specs(self, settings: Settings) -> list[RunSpec]:
         """CRLLK-D with each variant, on every map it applies to, and every seed."""
         specs = []
         for task in self.tasks:
-            pin = self.pin(task, settings.obs)
             for v in self.variants.values():
                 if v.applies(task, settings.obs):
-                    specs += [RunSpec("CRLLK-D", task, seed, tag=self.tag(v, task, settings.obs),
-                                      extra=v.overrides + (pin.overrides if pin else ()))
+                    specs += [RunSpec("CRLLK-D", task, seed, tag=v.tag, extra=v.overrides)
                               for seed in settings.seeds]
         return specs
 
@@ -128,8 +97,8 @@ class Ablation:
         for task in dict.fromkeys(s.task for s in outcome.documents):
             entries = {}
             for name, variant in self.variants.items():
-                tag = self.tag(variant, task, settings.obs)
-                specs = [s for s in outcome.documents if s.task == task and s.tag == tag]
+                specs = [s for s in outcome.documents
+                         if s.task == task and s.tag == variant.tag]
                 if not specs:
                     continue
                 entry = aggregate([outcome.documents[s] for s in specs])
@@ -143,11 +112,9 @@ class Ablation:
                 name: {"tag": v.tag, "overrides": list(v.overrides), "aid": v.aid,
                        "tasks": [t for t in self.tasks if v.applies(t, settings.obs)]}
                 for name, v in self.variants.items()}}
-        pins = {task: {"tag": pin.tag, "overrides": list(pin.overrides), "why": pin.why}
-                for task in maps if (pin := self.pin(task, settings.obs)) is not None}
         return {"title": self.title.format(obs=settings.obs), "thresholds": THRESHOLDS,
                 "settings": settings_dict(settings), **invocation(outcome), **described,
-                **({"pins": pins} if pins else {}), "maps": maps}
+                "maps": maps}
 
 
 def ablation_markdown(document: Mapping[str, Any], label: str = "variant") -> str:
@@ -171,9 +138,6 @@ def ablation_markdown(document: Mapping[str, Any], label: str = "variant") -> st
                            if v["tag"] else "the trainer's configuration")
             + f"; {', '.join(v['tasks']) or 'no map'})"
             for name, v in document["variants"].items()) + ".")
-    for task, pin in document.get("pins", {}).items():
-        lines.append(f"- On {task} the runs were {pin['why']} (" + ", ".join(
-            f"`{o}`" for o in pin["overrides"]) + f"; run directories `…{pin['tag']}-…`).")
     lines.append("")
     modes = [entry.get("mode") for entries in document["maps"].values()
              for entry in entries.values()]
@@ -277,9 +241,8 @@ AIDS = Ablation(
                 aid="encounter spawns"),
         Variant("pixel critics", "-pixelcritics", ("model.critic_input=observation",),
                 obs="pixels", aid="asymmetric (state) critics")),
-    AIDS_TASKS, baseline="default", pins={"obstacle_loop": CURVE_WEIGHT_PIN})
-"""The default (the trainer's configuration, its runs those of the tables; from pixels on
-``obstacle_loop`` the former default's, :data:`CURVE_WEIGHT_PIN`), without encounter spawns
+    AIDS_TASKS, baseline="default")
+"""The default (the trainer's configuration, its runs those of the tables), without encounter spawns
 where there are obstacles to meet, and with critics that read the camera like the actor (from
 state the critics read the state anyway: no such variant)."""
 

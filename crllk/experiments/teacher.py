@@ -10,7 +10,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from crllk.experiments.aids import CURVE_WEIGHT_PIN, Ablation, Variant, ablation_markdown, variants
+from crllk.experiments.aids import Ablation, Variant, ablation_markdown, variants
 from crllk.experiments.runs import Outcome, RunSpec, Settings
 
 TEACHER_TASKS = ("obstacle_loop", "small_loop")
@@ -25,7 +25,7 @@ TEACHER_VARIANTS = variants(
 to 0.3 over 150,000 frames and stays; annealed, it falls to 0 over 400,000 of the 500,000
 frames, so the last 100,000 are Lagrangian PPO alone; without, it is 0 throughout."""
 TEACHER = Ablation("teacher", "The teacher measured: CRLLK-D ({obs})", TEACHER_VARIANTS,
-                   TEACHER_TASKS, label="teacher", pins={"obstacle_loop": CURVE_WEIGHT_PIN})
+                   TEACHER_TASKS, label="teacher")
 
 
 def teacher_specs(settings: Settings) -> list[RunSpec]:
