@@ -45,3 +45,18 @@ def test_lead_counts_steps_before_a_cost_within_its_episode():
                 windows=((1, 1), (2, 3), (4, 9)))
     assert [r["steps"] for r in rows] == [1, 2, 0]
     assert rows[0]["predicted"] == 5.0 and rows[1]["predicted"] == 3.5
+
+
+def test_every_simulation_s_series_stands_alone():
+    """Two simulations side by side: a cost in one never reaches the other's steps, and each
+    bootstraps from its own last next value."""
+    cost = torch.tensor([[0.0, 1.0], [0.0, 0.0]])
+    terminated = torch.tensor([[False, True], [False, False]])
+    truncated = torch.zeros(2, 2, dtype=torch.bool)
+    next_value = torch.tensor([[7.0, 7.0], [0.0, 0.4]])
+    returns = discounted_costs_to_go(cost, terminated, truncated, next_value, 0.5)
+    assert torch.allclose(returns, torch.tensor([[0.5, 1.0], [0.1, 0.2]]))
+    rows = lead(torch.tensor([[0.3, 0.6], [0.9, 0.9]]), returns, cost, terminated | truncated,
+                windows=((1, 2),))
+    assert rows[0]["steps"] == 2 and math.isclose(rows[0]["predicted"], 0.45, rel_tol=1e-6)
+    assert math.isclose(rows[0]["realised"], 0.75, rel_tol=1e-6)

@@ -1117,3 +1117,12 @@ def test_the_annealed_teacher_s_collapse_is_its_training():
         final.append(float(rows[-1]["lambda_collision"]))
     assert (f"{late[0]:.2f} and {late[1]:.2f} over 401–489) and λ_coll climbs from about 18 to "
             f"{final[0]:.1f} and {final[1]:.1f}") in text
+
+
+def test_the_teacherless_runs_pass_the_blocked_direction_as_quoted():
+    root = REPO / "results/runs/pixels/obstacle_loop"
+    passed = sorted(round(100 * (1 - json.loads(
+        (root / f"CRLLK-D-noteacher-a0.5-seed{s}" / "val400.json").read_text())
+        ["breakdown"]["by_direction"]["intended"]["J_coll"])) for s in (0, 1))
+    assert f"it still passes {passed[0]}–{passed[1]} % of the approaches" in " ".join(
+        FINDINGS.split())

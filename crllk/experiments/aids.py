@@ -1,6 +1,6 @@
 """``python -m crllk.experiments aids``: what the default agent's training aids buy. CRLLK-D from
 the default configuration beside variants that each go without one aid, on the maps the aid
-concerns, every seed judged on the test seed (sampled policy and deployed mode, each start
+concerns, every seed judged on the test seed (sampled policy and deployed policy, each start
 direction apart):
 
 - encounter spawns (``encounters=0.5``: half the training episodes start 0.3–1.2 m before an

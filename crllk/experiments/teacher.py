@@ -1,7 +1,7 @@
 """``python -m crllk.experiments teacher``: what the privileged teacher buys. CRLLK-D from the
 default configuration (the imitation weight falls from 1 to its floor, 0.3, and stays there),
 with the teacher annealed to zero before the end, and without a teacher, on each map, every
-seed judged on the test seed (sampled policy and deployed mode, each start direction apart).
+seed judged on the test seed (sampled policy and deployed policy, each start direction apart).
 An :class:`~crllk.experiments.aids.Ablation`, like the other training aids'."""
 
 from __future__ import annotations
