@@ -833,7 +833,8 @@ def test_the_crllk_c_noise_and_no_bonus_rows_are_the_runs():
             f"direction, whose lane it does not block, and {len(endings) - curve - cone} times "
             "elsewhere") in text
     scales = [_steering_scale(p.parent) for p in (REPO / "results/runs/pixels").glob(
-        "*/*-C-*/policy.pt") if _max_log_std(p.parent) is None]
+        "*/*-C-*/policy.pt")  # finished runs (a run still training has no eval.json yet)
+        if _max_log_std(p.parent) is None and (p.parent / "eval.json").exists()]
     assert len(scales) >= 20
     assert f"from 0.61 at the start to {min(scales):.2f}–{max(scales):.2f} in every kept" in text
     starts = {float(line.split(":")[1]) for p in (REPO / "results/runs/pixels").glob(
@@ -1126,3 +1127,70 @@ def test_the_teacherless_runs_pass_the_blocked_direction_as_quoted():
         ["breakdown"]["by_direction"]["intended"]["J_coll"])) for s in (0, 1))
     assert f"it still passes {passed[0]}–{passed[1]} % of the approaches" in " ".join(
         FINDINGS.split())
+
+
+SEPARATE_CRITIC_RUNS = (("default, seed 0", "CRLLK-C-a0.5-seed0", "eval-400"),
+                        ("default, seed 1", "CRLLK-C-a0.5-seed1", "eval-400"),
+                        ("separate critics, seed 0", "CRLLK-C-separatecritics-a0.5-seed0",
+                         "val400"),
+                        ("separate critics, seed 1", "CRLLK-C-separatecritics-a0.5-seed1",
+                         "val400"))
+"""The separate-critics trial's rows: label, run directory, its sampled 400-episode evaluation."""
+
+
+def test_the_separate_critics_rows_are_their_evaluations_and_critics():
+    """The separate-critics trial: sampled and expected-action validation evaluations, late
+    training J_coll and final λ_coll; the collision critics' lead rows and calibration, and
+    the prose's counts, against the shared critics' files."""
+    import csv
+
+    root = REPO / "results/runs/pixels/obstacle_loop"
+    text = " ".join(FINDINGS.split())
+    ends = {}
+    for label, run, sampled_name in SEPARATE_CRITIC_RUNS:
+        sampled, deployed = (json.loads((root / run / f"{n}.json").read_text())
+                             for n in (sampled_name, "val400-deployed"))
+        assert all(d["evaluation"]["seed"] == 1_000_000 and d["evaluation"]["episodes"] == 400
+                   for d in (sampled, deployed))
+        assert deployed["evaluation"]["deployed"] == "expected_action"
+        with (root / run / "metrics.csv").open() as handle:
+            rows = list(csv.DictReader(handle))
+        late = [float(r["J_coll"]) for r in rows
+                if 400 <= int(r["iteration"]) <= 489 and r["J_coll"] not in ("", "nan")]
+        assert (f"| {label} | {_val400_cell(sampled)} | {_val400_cell(deployed)} | "
+                f"{sum(late) / len(late):.3f} | {float(rows[-1]['lambda_collision']):.1f} |"
+                ) in FINDINGS
+        separate = "separatecritics" in run
+        assert (f"shared_critic: {str(not separate).lower()}"
+                in (root / run / "config.yaml").read_text())
+        ends.setdefault(separate, []).append((_endings(sampled), _endings(deployed)))
+    trial, default = ends[True], ends[False]
+    assert (f"ended {trial[0][0]} and {trial[1][0]} of their 400 validation episodes on an "
+            f"obstacle or off the road, against {default[0][0]} and {default[1][0]} for the "
+            f"default, and the expected actions {trial[0][1]} and {trial[1][1]}, against "
+            f"{default[0][1]} and {default[1][1]}") in text
+    confident, shared_confident, variances, shared_variances, collisions = [], [], [], [], []
+    for label, run, _ in SEPARATE_CRITIC_RUNS[2:]:
+        fit = json.loads((root / run / "cost-critic-collision.json").read_text())
+        assert fit["frames"] == 61_440 and fit["cost_gamma"] == 0.95
+        cells = " | ".join(f"{w['predicted']:.3f} → {w['realised']:.3f}" for w in fit["lead"])
+        assert f"| {label} | {fit['cost_steps']} | {cells} |" in FINDINGS.splitlines()
+        assert max(w["predicted"] for w in fit["lead"]) < 0.1
+        confident.append(next(b for b in fit["calibration"] if b["from"] == 0.03))
+        variances.append(fit["explained_variance"])
+        collisions.append(fit["cost_steps"])
+    for _, run in COLLISION_CRITIC_RUNS:
+        fit = json.loads((root / run / "cost-critic-collision.json").read_text())
+        shared_confident.append(next(b for b in fit["calibration"] if b["from"] == 0.03))
+        shared_variances.append(fit["explained_variance"])
+    assert (f"followed by {confident[0]['realised']:.3f} and {confident[1]['realised']:.3f} on "
+            f"average ({confident[0]['steps']:,} and {confident[1]['steps']:,} steps), where the "
+            f"shared critic's were followed by {shared_confident[0]['realised']:.3f} and "
+            f"{shared_confident[1]['realised']:.3f} ({shared_confident[0]['steps']:,} and "
+            f"{shared_confident[1]['steps']:,} steps") in text
+    assert all(0.03 <= b["predicted"] < 0.1 for b in confident + shared_confident)
+    assert (f"explained variance is positive ({variances[0]:.3f} and {variances[1]:.3f}, "
+            f"against {shared_variances[0]:.3f} and {shared_variances[1]:.3f})"
+            ).replace("-", "−") in text
+    assert min(variances) > 0 > max(shared_variances)
+    assert f"({collisions[0]} and {collisions[1]} in 61,440 steps)" in text
