@@ -14,7 +14,14 @@ from torchrl.envs.utils import ExplorationType, set_exploration_type
 from torchrl.modules import TanhNormal
 
 from crllk.config import validate
-from crllk.rl.sampling import POLICY_ROWS, ActionNoise, action_noise_seeds, draw, sample_actions
+from crllk.rl.sampling import (
+    POLICY_ROWS,
+    ActionNoise,
+    action_noise_seeds,
+    draw,
+    draw_categorical,
+    sample_actions,
+)
 from crllk.training.build import build_run
 from crllk.training.compose import compose_config
 
@@ -133,3 +140,19 @@ def test_sample_actions_refuses_a_batch_without_its_streams():
             sample_actions(learner.actor, env.reset(), ActionNoise.seeded(0, 3))
     finally:
         env.close()
+
+
+@pytest.mark.parametrize("scale", [0.01, 1.0, 30.0])
+def test_drawing_from_logits_is_the_categorical_draw_bit_for_bit(scale):
+    """The collection's shortcut (no distribution object) draws the same actions with the
+    same log-probabilities as ``Categorical(logits=...)``, for flat, ordinary and extreme
+    logits, from the same streams."""
+    logits = torch.randn(64, 3, generator=torch.Generator().manual_seed(5)) * scale
+    logits[0] = torch.tensor([80.0, -80.0, 0.0])  # a probability that rounds to 0
+    ours, theirs = ActionNoise.seeded(11, 64), ActionNoise.seeded(11, 64)
+    for _ in range(5):
+        action, log_prob = draw_categorical(logits, ours)
+        expected_action, expected_log_prob = draw(Categorical(logits=logits), theirs)
+        assert torch.equal(action, expected_action)
+        assert torch.equal(log_prob, expected_log_prob)
+    assert action.dtype == torch.int64 and log_prob.shape == (64,)

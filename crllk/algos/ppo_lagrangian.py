@@ -20,6 +20,7 @@ from crllk.algos.base import TrainingEnv
 from crllk.algos.schedules import entropy_coeff, imitation_coeff, learning_rate
 from crllk.config import TrainConfig
 from crllk.rl.advantages import AdvantageModules, make_advantage_modules
+from crllk.rl.gradients import clip_each_group_
 from crllk.rl.lagrangian_advantage import LagrangianAdvantage
 from crllk.rl.loss import CriticsPPOLoss
 from crllk.rl.models import make_actor, make_critic, make_shared_critic
@@ -108,14 +109,14 @@ class PPOLagrangian:
         size, count = flat.shape[0], 0
         sums = torch.zeros(len(keys), dtype=torch.float64)
         for _ in range(ppo.epochs):
-            order = torch.randperm(size, generator=generator)
+            # one gather per epoch; its minibatches are slices of it (the same rows)
+            shuffled = flat[torch.randperm(size, generator=generator)]
             for start in range(0, size, ppo.minibatch_size):
-                out = self.loss(flat[order[start:start + ppo.minibatch_size]])
+                out = self.loss(shuffled[start:start + ppo.minibatch_size])
                 total = sum(out[name] for name in self.loss.loss_names)
                 self.optimizer.zero_grad(set_to_none=True)
                 total.backward()
-                for group in self._gradient_groups:
-                    torch.nn.utils.clip_grad_norm_(group, ppo.max_grad_norm, foreach=True)
+                clip_each_group_(self._gradient_groups, ppo.max_grad_norm)
                 self.optimizer.step()
                 sums += torch.stack([out[key].detach() for key in keys]).to("cpu", torch.float64)
                 count += 1

@@ -24,6 +24,7 @@ from torchrl.modules import ProbabilisticActor, TanhNormal
 from torchrl.objectives import LossModule
 
 from crllk.rl.advantages import AdvantageModules, make_advantage_modules
+from crllk.rl.direct import actor_distribution, run_module
 from crllk.rl.lagrangian_advantage import check_cost_names
 
 _ADVANTAGE_STD_EPS = 1e-6  # floor of the advantage std when standardising (advantage units)
@@ -258,7 +259,7 @@ says what to do, not how sure the policy should be, and its corrections at the e
 
     def _log_ratio(self, td: TensorDictBase) -> tuple[torch.Tensor, Distribution]:
         """log ρ = log π_θ(a|s) − log π_old(a|s), shape [*B, 1], and the current π_θ."""
-        dist = self.actor_network.get_dist(td)
+        dist = actor_distribution(self.actor_network, td)
         log_prob = dist.log_prob(_get(td, self.tensor_keys.action).detach())
         old_log_prob = _get(td, self.tensor_keys.sample_log_prob).detach()
         return _column(log_prob - old_log_prob, td.batch_size), dist
@@ -280,7 +281,7 @@ says what to do, not how sure the policy should be, and its corrections at the e
         for critic in (self.critic_network, *self.cost_critics.values()):
             if id(critic) not in seen:
                 seen.add(id(critic))
-                critic(td)
+                run_module(critic, td)
 
     def _value_loss(
         self, td: TensorDictBase, value_key: NestedKey, target_key: NestedKey

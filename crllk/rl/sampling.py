@@ -91,11 +91,7 @@ def draw(distribution: Distribution, noise: ActionNoise) -> tuple[torch.Tensor, 
         TypeError: for a distribution other than ``Categorical`` and ``TanhNormal``.
     """
     if isinstance(distribution, Categorical):
-        probs = distribution.probs
-        u = noise.uniform().to(probs.dtype)
-        cumulative = probs.cumsum(-1)
-        action = torch.searchsorted(cumulative, u.unsqueeze(-1), right=True).squeeze(-1)
-        action = action.clamp_max(probs.shape[-1] - 1)  # u above a rounded-down total
+        action = _inverse_cdf(distribution.probs, noise)
         return action, distribution.log_prob(action)
     if isinstance(distribution, TanhNormal):
         # In double precision, rounded once at the end: the vectorised float32 kernels round
@@ -110,6 +106,23 @@ def draw(distribution: Distribution, noise: ActionNoise) -> tuple[torch.Tensor, 
         dtype = base.mean.dtype
         return action.to(dtype), _sum_rightmost(log_prob, len(distribution.event_shape)).to(dtype)
     raise TypeError(f"no per-simulation sampling for {type(distribution).__name__}")
+
+
+def draw_categorical(logits: torch.Tensor, noise: ActionNoise
+                     ) -> tuple[torch.Tensor, torch.Tensor]:
+    """:func:`draw` of ``Categorical(logits=logits)``, bit for bit, without building the
+    distribution (whose checks cost more than the policy's small network during collection):
+    the same normalised logits, probabilities and draw."""
+    normalized = logits - logits.logsumexp(dim=-1, keepdim=True)
+    action = _inverse_cdf(torch.softmax(normalized, dim=-1), noise)
+    return action, normalized.gather(-1, action.unsqueeze(-1)).squeeze(-1)
+
+
+def _inverse_cdf(probs: torch.Tensor, noise: ActionNoise) -> torch.Tensor:
+    """Action ``k`` of each row where ``F(k-1) <= u < F(k)``, ``u`` from the row's stream."""
+    u = noise.uniform().to(probs.dtype)
+    action = torch.searchsorted(probs.cumsum(-1), u.unsqueeze(-1), right=True).squeeze(-1)
+    return action.clamp_max(probs.shape[-1] - 1)  # u above a rounded-down total
 
 
 POLICY_ROWS = 8
@@ -142,10 +155,14 @@ def sample_actions(actor: ProbabilisticActor, tensordict: TensorDictBase,
     outputs = outputs if isinstance(outputs, tuple) else (outputs,)
     for key, value in zip(network.out_keys, outputs, strict=True):
         tensordict.set(key, value[:count])
-    action, log_prob = draw(sampler.get_dist(tensordict), noise)
+    if sampler.distribution_class is Categorical and list(sampler.in_keys) == ["logits"]:
+        action, log_prob = draw_categorical(tensordict.get("logits"), noise)
+    else:
+        action, log_prob = draw(sampler.get_dist(tensordict), noise)
     tensordict.set(sampler.out_keys[0], action)
     tensordict.set(sampler.log_prob_key, log_prob)
     return tensordict
 
 
-__all__ = ["POLICY_ROWS", "ActionNoise", "action_noise_seeds", "draw", "sample_actions"]
+__all__ = ["POLICY_ROWS", "ActionNoise", "action_noise_seeds", "draw", "draw_categorical",
+           "sample_actions"]
