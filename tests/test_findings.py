@@ -1194,3 +1194,54 @@ def test_the_separate_critics_rows_are_their_evaluations_and_critics():
             ).replace("-", "−") in text
     assert min(variances) > 0 > max(shared_variances)
     assert f"({collisions[0]} and {collisions[1]} in 61,440 steps)" in text
+
+
+COST_DISCOUNT_C_RUNS = (("default, seed 0", "CRLLK-C-a0.5-seed0", "eval-400"),
+                        ("default, seed 1", "CRLLK-C-a0.5-seed1", "eval-400"),
+                        ("`ppo.cost_gamma=0.99`, seed 0", "CRLLK-C-costgamma99-a0.5-seed0",
+                         "val400"),
+                        ("`ppo.cost_gamma=0.99`, seed 1", "CRLLK-C-costgamma99-a0.5-seed1",
+                         "val400"))
+"""CRLLK-C's cost-discount trial: label, run directory, its sampled 400-episode evaluation."""
+
+
+def test_crllk_c_s_cost_discount_rows_are_their_evaluations():
+    """CRLLK-C with ``ppo.cost_gamma=0.99``: the rows (validation evaluations, late training
+    J_coll, final λ_coll), the late explained variance of the collision critic and the
+    prose's counts."""
+    import csv
+
+    root = REPO / "results/runs/pixels/obstacle_loop"
+    text = " ".join(FINDINGS.split())
+    hits, lates, variances = {}, {}, {}
+    for label, run, sampled_name in COST_DISCOUNT_C_RUNS:
+        sampled, deployed = (json.loads((root / run / f"{n}.json").read_text())
+                             for n in (sampled_name, "val400-deployed"))
+        assert all(d["evaluation"]["seed"] == 1_000_000 and d["evaluation"]["episodes"] == 400
+                   for d in (sampled, deployed))
+        assert deployed["evaluation"]["deployed"] == "expected_action"
+        with (root / run / "metrics.csv").open() as handle:
+            rows = list(csv.DictReader(handle))
+        late = [r for r in rows if 400 <= int(r["iteration"]) <= 489]
+        j_coll = [float(r["J_coll"]) for r in late if r["J_coll"] not in ("", "nan")]
+        assert (f"| {label} | {_val400_cell(sampled)} | {_val400_cell(deployed)} | "
+                f"{sum(j_coll) / len(j_coll):.3f} | {float(rows[-1]['lambda_collision']):.1f} |"
+                ) in FINDINGS
+        explained = [float(r["explained_variance_collision"]) for r in late]
+        trial = "costgamma99" in run
+        assert ("cost_gamma: 0.99" in (root / run / "config.yaml").read_text()) == trial
+        hits.setdefault(trial, []).append((_endings(sampled), _endings(deployed)))
+        lates.setdefault(trial, []).append(f"{sum(j_coll) / len(j_coll):.3f}")
+        variances.setdefault(trial, []).append(
+            f"{sum(explained) / len(explained):.3f}".replace("-", "−"))
+    assert (f"explained variance over iterations 400–489: {variances[True][0]} and "
+            f"{variances[True][1]}, against {variances[False][0]} and {variances[False][1]}"
+            ) in text
+    assert (f"{hits[True][0][0]} and {hits[True][1][0]} of their 400 validation episodes ended "
+            f"on an obstacle or off the road, against {hits[False][0][0]} and "
+            f"{hits[False][1][0]}, and their training episodes {lates[True][0]} and "
+            f"{lates[True][1]} per episode late in training, against {lates[False][0]} and "
+            f"{lates[False][1]}") in text
+    assert f"Seed 1's expected action missed α2 ({hits[True][1][1]} of 400)" in text
+    assert hits[True][0][1] == 0 and f"ends {hits[True][0][0]} of them there" in text
+    assert f"a collision 60 steps ahead now weighs {0.99 ** 60:.2f} in it" in text
