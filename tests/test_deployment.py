@@ -34,13 +34,19 @@ HISTORY = ["obs.history=2", "obs.history_stride=3"]
 """A policy that reads its last two images, three steps apart."""
 
 
+STATE_DEPENDENT_STD = ["model.state_dependent_std=true"]
+"""A Gaussian policy whose spread is a head of its network."""
+
+
 @pytest.fixture(scope="module", params=["pixels-discrete", "pixels-continuous", "state-discrete",
-                                        "pixels-discrete-history", "state-stoppable"])
+                                        "pixels-discrete-history", "state-stoppable",
+                                        "state-continuous-statestd"])
 def exported(request, tmp_path_factory):
-    obs, action, *history = request.param.split("-")
+    obs, action, *extras = request.param.split("-")
     run = run_in_process(tmp_path_factory.mktemp(request.param) / "run", 1,
                          [f"obs={obs}", f"action={action}", "eval.final=false",
-                          *(HISTORY if history else [])])
+                          *(HISTORY if "history" in extras else []),
+                          *(STATE_DEPENDENT_STD if "statestd" in extras else [])])
     assert exit_status(lambda: export.main([f"run={run}"])) == 0
     return run, obs, action
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import math
 from pathlib import Path
+from typing import Any
 
 import pytest
 from docs_pages import prose
@@ -811,9 +812,14 @@ def _steering_scale(run: Path) -> float:
 
 def _max_log_std(run: Path) -> float | None:
     """The run's ``model.max_log_std`` (None: unbounded, also for runs from before it)."""
+    return _model_setting(run, "max_log_std")
+
+
+def _model_setting(run: Path, name: str) -> Any:
+    """The run's ``model.<name>`` (None for runs from before the setting)."""
     from crllk.yaml_files import read_yaml
 
-    return (read_yaml(run / "config.yaml").get("model") or {}).get("max_log_std")
+    return (read_yaml(run / "config.yaml").get("model") or {}).get(name)
 
 
 def test_the_crllk_c_noise_and_no_bonus_rows_are_the_runs():
@@ -834,7 +840,8 @@ def test_the_crllk_c_noise_and_no_bonus_rows_are_the_runs():
             "elsewhere") in text
     scales = [_steering_scale(p.parent) for p in (REPO / "results/runs/pixels").glob(
         "*/*-C-*/policy.pt")  # finished runs (a run still training has no eval.json yet)
-        if _max_log_std(p.parent) is None and (p.parent / "eval.json").exists()]
+        if _max_log_std(p.parent) is None and (p.parent / "eval.json").exists()
+        and not _model_setting(p.parent, "state_dependent_std")]
     assert len(scales) >= 20
     assert f"from 0.61 at the start to {min(scales):.2f}–{max(scales):.2f} in every kept" in text
     starts = {float(line.split(":")[1]) for p in (REPO / "results/runs/pixels").glob(

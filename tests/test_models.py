@@ -68,6 +68,39 @@ def test_continuous_actor_spread_is_held_at_its_bound_which_then_gets_no_gradien
     assert td["scale"].max().item() == pytest.approx(math.exp(0.3))
 
 
+
+@pytest.mark.parametrize("observation, shape", [("state", (4,)), ("pixels", IMAGE)])
+def test_a_state_dependent_spread_starts_at_its_initial_value_and_learns_per_state(
+        observation, shape):
+    """With ``state_dependent_std`` the spread is a head of the network: about
+    ``initial_log_std`` everywhere at first, then different observations get different
+    spreads; it stays within its bounds, and no gradient flows where it is held."""
+    spec = Bounded(-1.0, 1.0, shape=(2,))
+    config = ModelConfig(initial_log_std=-0.5, state_dependent_std=True, max_log_std=0.5)
+    actor = make_actor(observation, shape, "continuous", spec, config)
+    assert not hasattr(actor.module[0].module, "log_std")
+    inputs = (torch.randn(8, *shape) if observation == "state"
+              else torch.randint(0, 256, (8, *shape), dtype=torch.uint8))
+    td = TensorDict({observation: inputs}, batch_size=[8])
+    actor(td)
+    assert td["scale"].shape == (8, 2)
+    assert td["scale"].log().sub(-0.5).abs().max() < 0.05
+    head = [m for m in actor.module[0].module.modules() if isinstance(m, torch.nn.Linear)][-1]
+    assert head.out_features == 4
+    with torch.no_grad():  # the spread's half of the head reads its input now
+        head.weight[2:].normal_(0.0, 0.05)
+    actor(td)
+    spreads = td["scale"].log()
+    assert spreads.std(dim=0).min() > 1e-3  # per observation
+    assert spreads.min() >= -5.0 - 1e-6 and spreads.max() <= 0.5 + 1e-6
+    with torch.no_grad():
+        head.bias[2:].fill_(10.0)  # far above the bound
+    actor(td)
+    assert torch.allclose(td["scale"], torch.full_like(td["scale"], math.exp(0.5)))
+    td["scale"].sum().backward()
+    assert head.bias.grad[2:].abs().max() == 0
+
+
 def test_state_features_are_scaled_by_name():
     scales = state_feature_scales(["lateral_offset", "yaw_rate", "duty_left_t-0", "unknown"])
     assert scales.tolist() == pytest.approx([0.1, 1.5, 0.5, 1.0])

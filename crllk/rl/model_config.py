@@ -28,6 +28,9 @@ class ModelConfig:
             actor-critic; critics only shape training, so the policy still drives from pixels).
         policy_commands: the policy also reads its own wheel commands of the last steps (those
             still in flight through the motor delay), which a robot knows without sensing.
+        state_dependent_std: the continuous actor's log standard deviations are outputs of
+            its network (per observation, starting at ``initial_log_std`` everywhere) instead
+            of one learned parameter per action.
     """
 
     encoder: str = setting("fast", check=one_of("fast", "original"))
@@ -38,6 +41,7 @@ class ModelConfig:
     shared_critic: bool = False
     critic_input: str = setting("observation", check=one_of("observation", "state"))
     policy_commands: bool = False
+    state_dependent_std: bool = False
 
 
 __all__ = ["ModelConfig"]

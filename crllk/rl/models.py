@@ -181,6 +181,31 @@ class GaussianParams(nn.Module):
         return loc, log_std.exp().expand_as(loc)
 
 
+LOG_STD_RANGE = (-5.0, 1.0)
+"""Bounds of a state-dependent log standard deviation (σ from 0.007 to 2.7 before the tanh,
+within the scales whose expected action :mod:`crllk.rl.expected_action` integrates exactly)."""
+
+
+class StateGaussianParams(nn.Module):
+    """Action means and log standard deviations from one head (``body`` gives
+    ``2 * action_dim`` outputs): log σ = ``initial_log_std`` + the head's second half, within
+    :data:`LOG_STD_RANGE` and at most ``max_log_std`` (outside, no gradient)."""
+
+    def __init__(self, body: nn.Module, action_dim: int, initial_log_std: float,
+                 max_log_std: float | None = None):
+        super().__init__()
+        self.body = body
+        self.action_dim = action_dim
+        self.initial_log_std = float(initial_log_std)
+        high = LOG_STD_RANGE[1] if max_log_std is None else min(max_log_std, LOG_STD_RANGE[1])
+        self.log_std_bounds = (LOG_STD_RANGE[0], high)
+
+    def forward(self, *inputs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        loc, offset = self.body(*inputs).split(self.action_dim, dim=-1)
+        log_std = (self.initial_log_std + offset).clamp(*self.log_std_bounds)
+        return loc, log_std.exp()
+
+
 COMMANDS_SCALE = 0.5
 """Typical magnitude of a commanded wheel duty (duty cycle), as for the state features."""
 
@@ -231,8 +256,12 @@ def make_actor(observation: str, observation_shape: Sequence[int], action: str,
     if action not in GAUSSIAN_ACTIONS:
         raise ValueError(f"action must be one of {', '.join(POLICY_ACTIONS)}, got {action!r}")
     action_dim = int(action_spec.shape[-1])
-    net = GaussianParams(body(action_dim), action_dim, config.initial_log_std,
-                         config.max_log_std)
+    if config.state_dependent_std:
+        net = StateGaussianParams(body(2 * action_dim), action_dim, config.initial_log_std,
+                                  config.max_log_std)
+    else:
+        net = GaussianParams(body(action_dim), action_dim, config.initial_log_std,
+                             config.max_log_std)
     module = TensorDictModule(net, in_keys=in_keys, out_keys=["loc", "scale"])
     low, high = action_spec.space.low, action_spec.space.high
     return ProbabilisticActor(module, in_keys=["loc", "scale"], spec=action_spec,
