@@ -1176,31 +1176,41 @@ def test_the_separate_critics_rows_are_their_evaluations_and_critics():
             f"obstacle or off the road, against {default[0][0]} and {default[1][0]} for the "
             f"default, and the expected actions {trial[0][1]} and {trial[1][1]}, against "
             f"{default[0][1]} and {default[1][1]}") in text
-    confident, shared_confident, variances, shared_variances, collisions = [], [], [], [], []
+    top, shared_top, variances, shared_variances, collisions = [], [], [], [], []
     for label, run, _ in SEPARATE_CRITIC_RUNS[2:]:
         fit = json.loads((root / run / "cost-critic-collision.json").read_text())
         assert fit["frames"] == 61_440 and fit["cost_gamma"] == 0.95
+        assert "total_frames: 500000" in (root / run / "config.yaml").read_text()
         cells = " | ".join(f"{w['predicted']:.3f} → {w['realised']:.3f}" for w in fit["lead"])
         assert f"| {label} | {fit['cost_steps']} | {cells} |" in FINDINGS.splitlines()
-        assert max(w["predicted"] for w in fit["lead"]) < 0.1
-        confident.append(next(b for b in fit["calibration"] if b["from"] == 0.03))
+        assert f"{fit['lead'][0]['predicted']:.2f}" == "0.03"
+        assert f"{fit['lead'][0]['realised']:.2f}" == "0.80"
+        bins = [b for b in fit["calibration"] if b["to"] is not None and b["to"] <= 0.1]
+        realised = [b["realised"] for b in bins]
+        assert len(bins) == 5 and realised == sorted(realised)  # rises with the prediction
+        top.append(bins[-1])
         variances.append(fit["explained_variance"])
         collisions.append(fit["cost_steps"])
+    assert collisions[0] == 3 and "seed 0's row averages only 3 approaches" in text
     for _, run in COLLISION_CRITIC_RUNS:
         fit = json.loads((root / run / "cost-critic-collision.json").read_text())
-        shared_confident.append(next(b for b in fit["calibration"] if b["from"] == 0.03))
+        bins = [b for b in fit["calibration"] if b["to"] is not None and b["to"] <= 0.1]
+        realised = [b["realised"] for b in bins]
+        assert realised != sorted(realised)
+        shared_top.append(bins[-1])
         shared_variances.append(fit["explained_variance"])
-    assert (f"followed by {confident[0]['realised']:.3f} and {confident[1]['realised']:.3f} on "
-            f"average ({confident[0]['steps']:,} and {confident[1]['steps']:,} steps), where the "
-            f"shared critic's were followed by {shared_confident[0]['realised']:.3f} and "
-            f"{shared_confident[1]['realised']:.3f} ({shared_confident[0]['steps']:,} and "
-            f"{shared_confident[1]['steps']:,} steps") in text
-    assert all(0.03 <= b["predicted"] < 0.1 for b in confident + shared_confident)
-    assert (f"explained variance is positive ({variances[0]:.3f} and {variances[1]:.3f}, "
-            f"against {shared_variances[0]:.3f} and {shared_variances[1]:.3f})"
+    assert all(b["from"] == 0.03 and b["to"] == 0.1 for b in top + shared_top)
+    assert (f"the prediction {top[0]['predicted']:.3f} is followed by {top[0]['realised']:.3f} "
+            f"and {top[1]['predicted']:.3f} by {top[1]['realised']:.3f} ({top[0]['steps']:,} "
+            f"and {top[1]['steps']:,} steps), where the shared critics' "
+            f"{shared_top[0]['predicted']:.3f} and {shared_top[1]['predicted']:.3f} were "
+            f"followed by {shared_top[0]['realised']:.3f} and {shared_top[1]['realised']:.3f} "
+            f"({shared_top[0]['steps']:,} and {shared_top[1]['steps']:,} steps)") in text
+    assert (f"is positive, {variances[0]:.3f} and {variances[1]:.3f}, against "
+            f"{shared_variances[0]:.3f} and {shared_variances[1]:.3f}."
             ).replace("-", "−") in text
     assert min(variances) > 0 > max(shared_variances)
-    assert f"({collisions[0]} and {collisions[1]} in 61,440 steps)" in text
+    assert f"with {collisions[0]} and {collisions[1]} collisions in 61,440 steps" in text
 
 
 COST_DISCOUNT_C_RUNS = (("default, seed 0", "CRLLK-C-a0.5-seed0", "eval-400"),

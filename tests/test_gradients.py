@@ -42,6 +42,23 @@ def test_each_group_is_clipped_as_torch_clips_it(scale):
                    zip(ours[0], networks(scale)[0], strict=True))
 
 
+def test_a_group_over_the_bound_is_clipped_and_one_under_it_is_not():
+    ours, theirs = networks(1.0), networks(1.0)
+    for group in (ours, theirs):
+        for p in group[1]:
+            p.grad.mul_(1e-4)  # the second network's gradient well under the bound
+    clip_each_group_(ours, 0.5)
+    for group in theirs:
+        torch.nn.utils.clip_grad_norm_(group, 0.5, foreach=True)
+    for a, b in zip(itertools.chain(*ours), itertools.chain(*theirs), strict=True):
+        assert (a.grad is None and b.grad is None) or torch.equal(a.grad, b.grad)
+    untouched = networks(1.0)[1]
+    assert all(torch.equal(a.grad, b.grad * 1e-4) for a, b in zip(ours[1], untouched,
+                                                                  strict=True))
+    first = torch.linalg.vector_norm(torch.cat([p.grad.flatten() for p in ours[0]]))
+    assert float(first) == pytest.approx(0.5, rel=1e-5)
+
+
 def test_groups_without_gradients_are_left_alone():
     groups = networks(1.0)
     for p in groups[0]:

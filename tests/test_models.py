@@ -68,7 +68,6 @@ def test_continuous_actor_spread_is_held_at_its_bound_which_then_gets_no_gradien
     assert td["scale"].max().item() == pytest.approx(math.exp(0.3))
 
 
-
 @pytest.mark.parametrize("observation, shape", [("state", (4,)), ("pixels", IMAGE)])
 def test_a_state_dependent_spread_starts_at_its_initial_value_and_learns_per_state(
         observation, shape):
@@ -99,6 +98,10 @@ def test_a_state_dependent_spread_starts_at_its_initial_value_and_learns_per_sta
     assert torch.allclose(td["scale"], torch.full_like(td["scale"], math.exp(0.5)))
     td["scale"].sum().backward()
     assert head.bias.grad[2:].abs().max() == 0
+    with torch.no_grad():
+        head.bias[2:].fill_(-10.0)  # far below the range
+    actor(td)
+    assert torch.allclose(td["scale"], torch.full_like(td["scale"], math.exp(-5.0)))
 
 
 def test_state_features_are_scaled_by_name():
@@ -166,3 +169,22 @@ def test_pixel_actor_with_commands_reads_them(action):
         assert not torch.allclose(dists[0].deterministic_sample, dists[1].deterministic_sample)
     with pytest.raises(KeyError):
         actor(TensorDict({"pixels": pixels}, [4]))
+
+
+@pytest.mark.parametrize("overrides, message", [
+    (["model.initial_log_std=2"], "model.initial_log_std: must lie in [-5.0, 1.0]"),
+    (["model.initial_log_std=-6"], "model.initial_log_std: must lie in [-5.0, 1.0]"),
+    (["model.max_log_std=-1", "model.initial_log_std=-0.5"],
+     "model.initial_log_std: must lie in [-5.0, -1.0]"),
+    (["model.max_log_std=-6"], "model.max_log_std: must be at least -5.0")])
+def test_a_state_dependent_spread_refuses_a_start_outside_its_bounds(overrides, message):
+    """Outside its bounds the spread would be held from the first step and never learn."""
+    from crllk.config import validate
+    from crllk.errors import ConfigError
+    from crllk.training.compose import compose_config
+
+    base = ["obs=state", "agent=CRLLK-C", "model.state_dependent_std=true"]
+    with pytest.raises(ConfigError) as caught:
+        validate(compose_config([*base, *overrides]))
+    assert message in str(caught.value) and "\n" not in str(caught.value)
+    validate(compose_config(overrides))  # the learned parameter takes any start

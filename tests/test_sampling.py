@@ -156,3 +156,32 @@ def test_drawing_from_logits_is_the_categorical_draw_bit_for_bit(scale):
         assert torch.equal(action, expected_action)
         assert torch.equal(log_prob, expected_log_prob)
     assert action.dtype == torch.int64 and log_prob.shape == (64,)
+
+
+def test_a_categorical_policy_draws_through_the_shortcut_and_a_probs_one_does_not(monkeypatch):
+    """The project's discrete actor (logits) never builds its distribution while collecting;
+    a sampler fed probabilities under the key ``logits`` is not mistaken for it."""
+    from tensordict import TensorDict
+    from tensordict.nn import TensorDictModule
+    from torchrl.modules import ProbabilisticActor
+
+    import crllk.rl.sampling as sampling
+
+    config = validate(compose_config(["task=small_loop", "obs=state", "num_envs=2",
+                                      "workers=1"]))
+    env, learner, _, _ = build_run(config)
+    td = env.reset()
+    env.close()
+
+    def refuse(*args):
+        raise AssertionError("built the distribution")
+
+    monkeypatch.setattr(sampling, "draw", refuse)
+    with torch.no_grad():
+        sample_actions(learner.actor, td, ActionNoise.seeded(0, 2))
+    probabilities = ProbabilisticActor(
+        TensorDictModule(lambda x: torch.softmax(x, -1), in_keys=["x"], out_keys=["logits"]),
+        in_keys={"probs": "logits"}, distribution_class=Categorical, return_log_prob=True)
+    with pytest.raises(AssertionError, match="built the distribution"):
+        sample_actions(probabilities, TensorDict({"x": torch.zeros(2, 3)}, batch_size=[2]),
+                       ActionNoise.seeded(0, 2))

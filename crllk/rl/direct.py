@@ -6,14 +6,28 @@ from __future__ import annotations
 from tensordict import TensorDictBase
 from tensordict.nn import TensorDictModule
 from torch.distributions import Distribution
-from torchrl.modules import ProbabilisticActor
+from torchrl.modules import ProbabilisticActor, ValueOperator
+
+
+def is_plain(module: object) -> bool:
+    """Whether ``module(tensordict)`` only calls its network on the entries of its
+    ``in_keys``, in order, and sets its outputs under its ``out_keys`` in place (a plain
+    :class:`TensorDictModule` or :class:`ValueOperator`: no keyword inputs, no method, no
+    copy)."""
+    return (type(module) in (TensorDictModule, ValueOperator)
+            and getattr(module, "_kwargs", None) is None
+            and getattr(module, "method", None) is None
+            and not getattr(module, "method_kwargs", None)
+            and not getattr(module, "get_kwargs", None)
+            and getattr(module, "inplace", True) is True
+            and "_" not in module.out_keys)
 
 
 def run_module(module: TensorDictModule, tensordict: TensorDictBase) -> None:
-    """Writes into ``tensordict`` what ``module(tensordict)`` writes: the network called on
-    the entries of its ``in_keys``, its outputs set under its ``out_keys``. A module whose
-    inputs are not a plain list of keys runs as ``module(tensordict)``."""
-    if type(module.in_keys) is not list or not hasattr(module, "module"):
+    """Writes into ``tensordict`` what ``module(tensordict)`` writes: for a plain module
+    (:func:`is_plain`) the network called on the entries of its ``in_keys``, its outputs set
+    under its ``out_keys``; any other module runs as ``module(tensordict)``."""
+    if not is_plain(module):
         module(tensordict)
         return
     outputs = module.module(*(tensordict.get(key) for key in module.in_keys))
@@ -23,13 +37,14 @@ def run_module(module: TensorDictModule, tensordict: TensorDictBase) -> None:
 
 
 def actor_distribution(actor: ProbabilisticActor, tensordict: TensorDictBase) -> Distribution:
-    """``actor.get_dist(tensordict)`` for an actor of one network and its sampler (the
-    network's outputs written into ``tensordict``, as there)."""
+    """``actor.get_dist(tensordict)`` (the network's outputs written into ``tensordict``, as
+    there), with a plain network (:func:`is_plain`) run directly; an actor of more than a
+    network and its sampler runs as ``actor.get_dist``."""
     modules = actor.module
-    if len(modules) != 2 or not isinstance(modules[0], TensorDictModule):
+    if len(modules) != 2 or not is_plain(modules[0]):
         return actor.get_dist(tensordict)
     run_module(modules[0], tensordict)
     return modules[-1].get_dist(tensordict)
 
 
-__all__ = ["actor_distribution", "run_module"]
+__all__ = ["actor_distribution", "is_plain", "run_module"]

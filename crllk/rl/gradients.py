@@ -12,7 +12,8 @@ def clip_each_group_(groups: Sequence[Sequence[torch.nn.Parameter]], max_norm: f
     """Scales each group's gradients to a total 2-norm of at most ``max_norm``, bit for bit as
     ``torch.nn.utils.clip_grad_norm_(group, max_norm, foreach=True)`` on every group in turn
     does, with one norm kernel and one multiply for all of them (parameters without a
-    gradient are left out, as there)."""
+    gradient are left out, as there). The groups must be disjoint (each network's own
+    parameters), on one device and of one dtype, as the learner's are."""
     grads = [[p.grad for p in group if p.grad is not None] for group in groups]
     flat = [grad for group in grads for grad in group]
     if not flat:

@@ -3,9 +3,14 @@ read without importing torch (:mod:`crllk.rl.models` builds the networks from th
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 from crllk.settings import one_of, positive, setting
+
+STATE_LOG_STD_RANGE = (-5.0, 1.0)
+"""Bounds of a state-dependent log standard deviation (σ from 0.007 to 2.7 before the tanh,
+within the scales whose expected action :mod:`crllk.rl.expected_action` integrates to 1e-11)."""
 
 
 @dataclass
@@ -19,8 +24,8 @@ class ModelConfig:
         initial_log_std: log standard deviation of the continuous actor's first actions
             (before the tanh squashing).
         max_log_std: the most that log standard deviation may be (None: no bound); the learned
-            parameter is clamped to it where the actor is evaluated, so above it the parameter
-            gets no gradient and stays there.
+            parameter (or, with ``state_dependent_std``, each observation's value) is clamped
+            to it where the actor is evaluated, so above it no gradient flows.
         shared_critic: one encoder with a value head for the reward and each cost, instead
             of one network per critic.
         critic_input: what the critics read: ``"observation"`` (the policy's input) or
@@ -29,8 +34,8 @@ class ModelConfig:
         policy_commands: the policy also reads its own wheel commands of the last steps (those
             still in flight through the motor delay), which a robot knows without sensing.
         state_dependent_std: the continuous actor's log standard deviations are outputs of
-            its network (per observation, starting at ``initial_log_std`` everywhere) instead
-            of one learned parameter per action.
+            its network (per observation, starting at ``initial_log_std`` everywhere, within
+            :data:`STATE_LOG_STD_RANGE`) instead of one learned parameter per action.
     """
 
     encoder: str = setting("fast", check=one_of("fast", "original"))
@@ -43,5 +48,19 @@ class ModelConfig:
     policy_commands: bool = False
     state_dependent_std: bool = False
 
+    def problems(self) -> Iterator[tuple[str, str]]:
+        if not self.state_dependent_std:
+            return
+        low, high = STATE_LOG_STD_RANGE
+        if self.max_log_std is not None:
+            high = min(high, self.max_log_std)
+            if self.max_log_std < low:
+                yield "max_log_std", (f"must be at least {low} with state_dependent_std, got "
+                                      f"{self.max_log_std}")
+                return
+        if not low <= self.initial_log_std <= high:
+            yield "initial_log_std", (f"must lie in [{low}, {high}] with state_dependent_std "
+                                      f"(and max_log_std), got {self.initial_log_std}")
 
-__all__ = ["ModelConfig"]
+
+__all__ = ["STATE_LOG_STD_RANGE", "ModelConfig"]

@@ -28,7 +28,7 @@ from torchrl.data import Categorical as CategoricalSpec
 from torchrl.data import TensorSpec
 from torchrl.modules import ProbabilisticActor, TanhNormal, ValueOperator
 
-from crllk.rl.model_config import ModelConfig
+from crllk.rl.model_config import STATE_LOG_STD_RANGE, ModelConfig
 from crllk.tasks.actions import DISCRETE_DUTIES, GAUSSIAN_ACTIONS, POLICY_ACTIONS
 
 PIXEL_SCALE = 1.0 / 255.0  # uint8 camera value -> [0, 1]
@@ -181,15 +181,11 @@ class GaussianParams(nn.Module):
         return loc, log_std.exp().expand_as(loc)
 
 
-LOG_STD_RANGE = (-5.0, 1.0)
-"""Bounds of a state-dependent log standard deviation (σ from 0.007 to 2.7 before the tanh,
-within the scales whose expected action :mod:`crllk.rl.expected_action` integrates exactly)."""
-
-
 class StateGaussianParams(nn.Module):
     """Action means and log standard deviations from one head (``body`` gives
     ``2 * action_dim`` outputs): log σ = ``initial_log_std`` + the head's second half, within
-    :data:`LOG_STD_RANGE` and at most ``max_log_std`` (outside, no gradient)."""
+    :data:`~crllk.rl.model_config.STATE_LOG_STD_RANGE` and at most ``max_log_std`` (outside,
+    no gradient)."""
 
     def __init__(self, body: nn.Module, action_dim: int, initial_log_std: float,
                  max_log_std: float | None = None):
@@ -197,8 +193,8 @@ class StateGaussianParams(nn.Module):
         self.body = body
         self.action_dim = action_dim
         self.initial_log_std = float(initial_log_std)
-        high = LOG_STD_RANGE[1] if max_log_std is None else min(max_log_std, LOG_STD_RANGE[1])
-        self.log_std_bounds = (LOG_STD_RANGE[0], high)
+        low, high = STATE_LOG_STD_RANGE
+        self.log_std_bounds = (low, high if max_log_std is None else min(max_log_std, high))
 
     def forward(self, *inputs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         loc, offset = self.body(*inputs).split(self.action_dim, dim=-1)

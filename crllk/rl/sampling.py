@@ -155,8 +155,9 @@ def sample_actions(actor: ProbabilisticActor, tensordict: TensorDictBase,
     outputs = outputs if isinstance(outputs, tuple) else (outputs,)
     for key, value in zip(network.out_keys, outputs, strict=True):
         tensordict.set(key, value[:count])
-    if sampler.distribution_class is Categorical and list(sampler.in_keys) == ["logits"]:
-        action, log_prob = draw_categorical(tensordict.get("logits"), noise)
+    if (sampler.distribution_class is Categorical and list(sampler.dist_keys) == ["logits"]
+            and not sampler.distribution_kwargs):  # the distribution takes the logits as is
+        action, log_prob = draw_categorical(tensordict.get(sampler.in_keys[0]), noise)
     else:
         action, log_prob = draw(sampler.get_dist(tensordict), noise)
     tensordict.set(sampler.out_keys[0], action)
