@@ -1136,6 +1136,40 @@ def test_the_teacherless_runs_pass_the_blocked_direction_as_quoted():
         FINDINGS.split())
 
 
+def _crllk_c_trial_row(root: Path, label: str, run: str, sampled_name: str
+                       ) -> tuple[dict, dict, list[dict], list[float]]:
+    """A CRLLK-C trial's findings row: its sampled and expected-action validation evaluations
+    (400 episodes), then the mean training J_coll over iterations 400–489 and the final
+    λ_coll, asserted in the page; returns the two evaluations, the late rows of
+    ``metrics.csv`` and their J_coll values."""
+    import csv
+
+    sampled, deployed = (json.loads((root / run / f"{n}.json").read_text())
+                         for n in (sampled_name, "val400-deployed"))
+    assert all(d["evaluation"]["seed"] == 1_000_000 and d["evaluation"]["episodes"] == 400
+               for d in (sampled, deployed))
+    assert deployed["evaluation"]["deployed"] == "expected_action"
+    with (root / run / "metrics.csv").open() as handle:
+        rows = list(csv.DictReader(handle))
+    late = [r for r in rows if 400 <= int(r["iteration"]) <= 489]
+    j_coll = [float(r["J_coll"]) for r in late if r["J_coll"] not in ("", "nan")]
+    assert (f"| {label} | {_val400_cell(sampled)} | {_val400_cell(deployed)} | "
+            f"{sum(j_coll) / len(j_coll):.3f} | {float(rows[-1]['lambda_collision']):.1f} |"
+            ) in FINDINGS
+    return sampled, deployed, late, j_coll
+
+
+def _collision_critic_row(root: Path, label: str, run: str, cost_gamma: float) -> dict:
+    """A 500,000-frame run's ``cost-critic-collision.json`` (60 batches, the run's cost
+    discount), its lead row asserted in the page; returns the file's content."""
+    fit = json.loads((root / run / "cost-critic-collision.json").read_text())
+    assert fit["frames"] == 61_440 and fit["cost_gamma"] == cost_gamma
+    assert "total_frames: 500000" in (root / run / "config.yaml").read_text()
+    cells = " | ".join(f"{w['predicted']:.3f} → {w['realised']:.3f}" for w in fit["lead"])
+    assert f"| {label} | {fit['cost_steps']} | {cells} |" in FINDINGS.splitlines()
+    return fit
+
+
 SEPARATE_CRITIC_RUNS = (("default, seed 0", "CRLLK-C-a0.5-seed0", "eval-400"),
                         ("default, seed 1", "CRLLK-C-a0.5-seed1", "eval-400"),
                         ("separate critics, seed 0", "CRLLK-C-separatecritics-a0.5-seed0",
@@ -1149,24 +1183,12 @@ def test_the_separate_critics_rows_are_their_evaluations_and_critics():
     """The separate-critics trial: sampled and expected-action validation evaluations, late
     training J_coll and final λ_coll; the collision critics' lead rows and calibration, and
     the prose's counts, against the shared critics' files."""
-    import csv
 
     root = REPO / "results/runs/pixels/obstacle_loop"
     text = " ".join(FINDINGS.split())
     ends = {}
     for label, run, sampled_name in SEPARATE_CRITIC_RUNS:
-        sampled, deployed = (json.loads((root / run / f"{n}.json").read_text())
-                             for n in (sampled_name, "val400-deployed"))
-        assert all(d["evaluation"]["seed"] == 1_000_000 and d["evaluation"]["episodes"] == 400
-                   for d in (sampled, deployed))
-        assert deployed["evaluation"]["deployed"] == "expected_action"
-        with (root / run / "metrics.csv").open() as handle:
-            rows = list(csv.DictReader(handle))
-        late = [float(r["J_coll"]) for r in rows
-                if 400 <= int(r["iteration"]) <= 489 and r["J_coll"] not in ("", "nan")]
-        assert (f"| {label} | {_val400_cell(sampled)} | {_val400_cell(deployed)} | "
-                f"{sum(late) / len(late):.3f} | {float(rows[-1]['lambda_collision']):.1f} |"
-                ) in FINDINGS
+        sampled, deployed, _, _ = _crllk_c_trial_row(root, label, run, sampled_name)
         separate = "separatecritics" in run
         assert (f"shared_critic: {str(not separate).lower()}"
                 in (root / run / "config.yaml").read_text())
@@ -1177,18 +1199,16 @@ def test_the_separate_critics_rows_are_their_evaluations_and_critics():
             f"default, and the expected actions {trial[0][1]} and {trial[1][1]}, against "
             f"{default[0][1]} and {default[1][1]}") in text
     top, shared_top, variances, shared_variances, collisions = [], [], [], [], []
+    correlations, shared_correlations = [], []
     for label, run, _ in SEPARATE_CRITIC_RUNS[2:]:
-        fit = json.loads((root / run / "cost-critic-collision.json").read_text())
-        assert fit["frames"] == 61_440 and fit["cost_gamma"] == 0.95
-        assert "total_frames: 500000" in (root / run / "config.yaml").read_text()
-        cells = " | ".join(f"{w['predicted']:.3f} → {w['realised']:.3f}" for w in fit["lead"])
-        assert f"| {label} | {fit['cost_steps']} | {cells} |" in FINDINGS.splitlines()
+        fit = _collision_critic_row(root, label, run, 0.95)
         assert f"{fit['lead'][0]['predicted']:.2f}" == "0.03"
         assert f"{fit['lead'][0]['realised']:.2f}" == "0.80"
         bins = [b for b in fit["calibration"] if b["to"] is not None and b["to"] <= 0.1]
         realised = [b["realised"] for b in bins]
         assert len(bins) == 5 and realised == sorted(realised)  # rises with the prediction
         top.append(bins[-1])
+        correlations.append(fit["realised_correlation"])
         variances.append(fit["explained_variance"])
         collisions.append(fit["cost_steps"])
     assert collisions[0] == 3 and "seed 0's row averages only 3 approaches" in text
@@ -1198,6 +1218,7 @@ def test_the_separate_critics_rows_are_their_evaluations_and_critics():
         realised = [b["realised"] for b in bins]
         assert realised != sorted(realised)
         shared_top.append(bins[-1])
+        shared_correlations.append(fit["realised_correlation"])
         shared_variances.append(fit["explained_variance"])
     assert all(b["from"] == 0.03 and b["to"] == 0.1 for b in top + shared_top)
     assert (f"the prediction {top[0]['predicted']:.3f} is followed by {top[0]['realised']:.3f} "
@@ -1210,6 +1231,9 @@ def test_the_separate_critics_rows_are_their_evaluations_and_critics():
             f"{shared_variances[0]:.3f} and {shared_variances[1]:.3f}."
             ).replace("-", "−") in text
     assert min(variances) > 0 > max(shared_variances)
+    figures = [f"{c:.3f}".replace("-", "−") for c in correlations + shared_correlations]
+    assert (f"correlate with the realised cost-to-go ({figures[0]} and {figures[1]}, against "
+            f"{figures[2]} and {figures[3]})") in text
     assert f"with {collisions[0]} and {collisions[1]} collisions in 61,440 steps" in text
 
 
@@ -1226,24 +1250,12 @@ def test_crllk_c_s_cost_discount_rows_are_their_evaluations():
     """CRLLK-C with ``ppo.cost_gamma=0.99``: the rows (validation evaluations, late training
     J_coll, final λ_coll), the late explained variance of the collision critic and the
     prose's counts."""
-    import csv
 
     root = REPO / "results/runs/pixels/obstacle_loop"
     text = " ".join(FINDINGS.split())
     hits, lates, variances = {}, {}, {}
     for label, run, sampled_name in COST_DISCOUNT_C_RUNS:
-        sampled, deployed = (json.loads((root / run / f"{n}.json").read_text())
-                             for n in (sampled_name, "val400-deployed"))
-        assert all(d["evaluation"]["seed"] == 1_000_000 and d["evaluation"]["episodes"] == 400
-                   for d in (sampled, deployed))
-        assert deployed["evaluation"]["deployed"] == "expected_action"
-        with (root / run / "metrics.csv").open() as handle:
-            rows = list(csv.DictReader(handle))
-        late = [r for r in rows if 400 <= int(r["iteration"]) <= 489]
-        j_coll = [float(r["J_coll"]) for r in late if r["J_coll"] not in ("", "nan")]
-        assert (f"| {label} | {_val400_cell(sampled)} | {_val400_cell(deployed)} | "
-                f"{sum(j_coll) / len(j_coll):.3f} | {float(rows[-1]['lambda_collision']):.1f} |"
-                ) in FINDINGS
+        sampled, deployed, late, j_coll = _crllk_c_trial_row(root, label, run, sampled_name)
         explained = [float(r["explained_variance_collision"]) for r in late]
         trial = "costgamma99" in run
         assert ("cost_gamma: 0.99" in (root / run / "config.yaml").read_text()) == trial
@@ -1251,14 +1263,59 @@ def test_crllk_c_s_cost_discount_rows_are_their_evaluations():
         lates.setdefault(trial, []).append(f"{sum(j_coll) / len(j_coll):.3f}")
         variances.setdefault(trial, []).append(
             f"{sum(explained) / len(explained):.3f}".replace("-", "−"))
-    assert (f"explained variance over iterations 400–489: {variances[True][0]} and "
-            f"{variances[True][1]}, against {variances[False][0]} and {variances[False][1]}"
-            ) in text
+    assert (f"mean over iterations 400–489) is positive, {variances[True][0]} and "
+            f"{variances[True][1]}, where the default's is negative ({variances[False][0]} and "
+            f"{variances[False][1]})") in text
     assert (f"{hits[True][0][0]} and {hits[True][1][0]} of their 400 validation episodes ended "
             f"on an obstacle or off the road, against {hits[False][0][0]} and "
             f"{hits[False][1][0]}, and their training episodes {lates[True][0]} and "
             f"{lates[True][1]} per episode late in training, against {lates[False][0]} and "
             f"{lates[False][1]}") in text
+    assert hits[True][1][1] / 400 > 0.02
     assert f"Seed 1's expected action missed α2 ({hits[True][1][1]} of 400)" in text
-    assert hits[True][0][1] == 0 and f"ends {hits[True][0][0]} of them there" in text
-    assert f"a collision 60 steps ahead now weighs {0.99 ** 60:.2f} in it" in text
+    assert hits[True][0][1] == 0
+    assert f"ends {hits[True][0][0]} of them on an obstacle or off the road" in text
+    assert (f"A collision 60 steps ahead now weighs {0.99 ** 60:.2f} in the critic's target "
+            f"({0.95 ** 60:.2f} at 0.95)") in text
+    correlations, confident = [], []
+    for label, run, _ in COST_DISCOUNT_C_RUNS[2:]:
+        fit = _collision_critic_row(root, label, run, 0.99)
+        assert fit["lead"][0]["predicted"] < fit["lead"][0]["realised"] / 10
+        correlations.append(f"{fit['realised_correlation']:.3f}")
+        confident.append(next(b for b in fit["calibration"] if b["from"] == 0.1))
+    assert all(b["to"] == 0.3 and b["predicted"] > b["realised"] for b in confident)
+    assert (f"correlate with the realised cost-to-go {correlations[0]} and {correlations[1]}"
+            ) in text
+    assert (f"({confident[0]['predicted']:.3f} and {confident[1]['predicted']:.3f}, followed "
+            f"by {confident[0]['realised']:.3f} and {confident[1]['realised']:.3f})") in text
+
+
+STATE_SPREAD_RUNS = (("default, seed 0", "CRLLK-C-a0.5-seed0", "eval-400"),
+                     ("default, seed 1", "CRLLK-C-a0.5-seed1", "eval-400"),
+                     ("state-dependent spread, seed 0", "CRLLK-C-statestd-a0.5-seed0", "val400"),
+                     ("state-dependent spread, seed 1", "CRLLK-C-statestd-a0.5-seed1", "val400"))
+"""CRLLK-C's state-dependent-spread trial: label, run directory, sampled 400-episode file."""
+
+
+def test_the_state_dependent_spread_rows_are_their_evaluations():
+    """The rows (validation evaluations, late training J_coll, final λ_coll), the reverse
+    direction's collisions and the updates' KL quoted in the prose."""
+
+    root = REPO / "results/runs/pixels/obstacle_loop"
+    text = " ".join(FINDINGS.split())
+    hits, reverse, kl = {}, [], {}
+    for label, run, sampled_name in STATE_SPREAD_RUNS:
+        sampled, _, late, j_coll = _crllk_c_trial_row(root, label, run, sampled_name)
+        trial = "statestd" in run
+        assert bool(_model_setting(root / run, "state_dependent_std")) == trial
+        hits.setdefault(trial, []).append(_endings(sampled))
+        kl.setdefault(trial, []).append(sum(float(r["kl_approx"]) for r in late) / len(late))
+        if trial:
+            reverse.append(sampled["breakdown"]["by_direction"]["reverse"]["J_coll"])
+            assert f"{sum(j_coll) / len(j_coll):.3f}" in text
+    assert (f"ended {hits[True][0]} and {hits[True][1]} of their 400 validation episodes on an "
+            f"obstacle or off the road (against {hits[False][0]} and {hits[False][1]})") in text
+    assert f"(J_coll {reverse[0]:.3f} and {reverse[1]:.3f} there)" in text
+    assert (f"(mean approximate KL over those iterations {kl[True][0]:.3f} and "
+            f"{kl[True][1]:.3f}, against {kl[False][0]:.4f} and {kl[False][1]:.4f})") in text
+    assert min(kl[True]) > 8 * max(kl[False])
