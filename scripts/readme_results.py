@@ -6,7 +6,10 @@ evaluations.
 
 Each cell of the table is the mean over training seeds of J_clane (dm) / J_coll / J_R (m) of
 the sampled policy on the test seed, from ``results/pixels/table1.json``, ``table_zigzag.json``
-and ``table_obstacle_loop.json``, with how many seeds hold both constraints. The peer paragraph
+and ``table_obstacle_loop.json``, with how many seeds hold both constraints (on the point
+estimate, then at the 95 % upper bound); below it, the same counts for the CRLLK agents'
+deployed policies and, on ``obstacle_loop``, each constraint in the blocked direction alone.
+The peer paragraph
 ranks, per map of ``results/state/peers.json``, every learner by its worst seed's largest
 metric over its threshold, and says whether an OmniSafe learner beats CRLLK-D; the traffic
 paragraph, per task of
@@ -35,7 +38,9 @@ MULTIPLIER_NAMES = {"lane": "λ_lane", "collision": "λ_coll", "headway": "λ_he
 
 
 def results_table(results: Path = REPO / "results" / "pixels") -> str:
-    """The Markdown table: one row per agent, one column per map."""
+    """The Markdown table (one row per agent, one column per map: its mean metrics, the seeds
+    that hold both constraints, and those that hold them at the 95 % upper bound), then what
+    the CRLLK agents' deployed policies hold and the blocked direction of ``obstacle_loop``."""
     documents = {task: json.loads((results / name).read_text()) for task, name in TABLES.items()}
     agents = list(next(iter(documents.values()))["agents"])
     lines = ["| agent | " + " | ".join(f"`{task}`" for task in TABLES) + " |",
@@ -45,10 +50,59 @@ def results_table(results: Path = REPO / "results" / "pixels") -> str:
         for document in documents.values():
             entry = document["agents"][agent]
             held = sum(document["runs"][run]["satisfied"] for run in entry["runs"])
+            bound = _held_at_bound(entry, document["thresholds"])
             cells.append(f"{entry['J_clane']['mean']:.3f} / {entry['J_coll']['mean']:.3f} / "
-                         f"{entry['J_R']['mean']:.2f} ({held} of {len(entry['runs'])})")
+                         f"{entry['J_R']['mean']:.2f} ({held} of {len(entry['runs'])}; "
+                         f"{bound} at the 95 % bound)")
         lines.append(f"| {agent} | " + " | ".join(cells) + " |")
-    return "\n".join(lines)
+    return "\n".join(lines) + "\n\n" + _deployed_and_blocked(documents)
+
+
+def _held_at_bound(entry: dict, thresholds: dict) -> int:
+    """Seeds whose 95 % intervals of J_clane and J_coll lie wholly within the thresholds."""
+    intervals = entry["intervals"]
+    return sum(lane[1] <= thresholds["lane"] and coll[1] <= thresholds["collision"]
+               for lane, coll in zip(intervals["J_clane"], intervals["J_coll"], strict=True))
+
+
+CRLLK_AGENTS = ("CRLLK-D", "CRLLK-C")
+"""The learned-multiplier agents whose deployed policies and blocked direction are reported."""
+
+
+def _deployed_and_blocked(documents: dict[str, dict]) -> str:
+    """Two sentences: the CRLLK agents' deployed policies' seeds that hold both constraints
+    (point estimate, 95 % upper bound) per map, and on ``obstacle_loop`` the seeds whose
+    episodes in the direction the obstacles block hold each constraint alone."""
+    deployed = []
+    for agent in CRLLK_AGENTS:
+        cells = []
+        for task, document in documents.items():
+            mode = document["agents"][agent]["mode"]
+            cells.append(f"`{task}` {sum(mode['satisfied'])} and "
+                         f"{_held_at_bound(mode, document['thresholds'])}")
+        deployed.append(f"{agent} " + ", ".join(cells))
+    document = documents["obstacle_loop"]
+    thresholds = document["thresholds"]
+    blocked = []
+    for agent in CRLLK_AGENTS:
+        entry = document["agents"][agent]
+        parts = []
+        for name, source in (("sampled", entry), ("deployed", entry["mode"])):
+            directions = [seed["intended"] for seed in source["by_direction"]]
+            coll = sum(d["J_coll"] <= thresholds["collision"] for d in directions)
+            lane = sum(d["J_clane"] <= thresholds["lane"] for d in directions)
+            lanes = [d["J_clane"] for d in directions]
+            parts.append(f"{name} J_coll on {coll} and J_clane on {lane} of {len(directions)} "
+                         f"(J_clane {min(lanes):.2f}–{max(lanes):.2f} dm)")
+        blocked.append(f"{agent} " + ", ".join(parts))
+    episodes = sorted({seed["intended"]["episodes"] for agent in CRLLK_AGENTS
+                       for seed in document["agents"][agent]["by_direction"]})
+    count = str(episodes[0]) if len(episodes) == 1 else f"{episodes[0]}–{episodes[-1]}"
+    return ("The CRLLK agents' deployed policies (expected duties, expected actions), seeds that "
+            "hold both constraints on the point estimate and at the 95 % upper bound: "
+            + "; ".join(deployed) + ". On `obstacle_loop`, in the direction the obstacles block "
+            f"alone ({count} of each run's 400 test episodes), the seeds that hold each "
+            "constraint: " + "; ".join(blocked) + ".")
 
 
 def _worst(entry: dict, thresholds: dict) -> tuple[float, float, float]:
