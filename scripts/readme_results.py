@@ -9,13 +9,12 @@ the sampled policy on the test seed, from ``results/pixels/table1.json``, ``tabl
 and ``table_obstacle_loop.json``, with how many seeds hold both constraints (on the point
 estimate, then at the 95 % upper bound); below it, the same counts for the CRLLK agents'
 deployed policies and, on ``obstacle_loop``, each constraint in the blocked direction alone.
-The peer paragraph
-ranks, per map of ``results/state/peers.json``, every learner by its worst seed's largest
-metric over its threshold, and says whether an OmniSafe learner beats CRLLK-D; the traffic
-paragraph, per task of
-``results/pixels/traffic.json``, each agent's seeds that hold, its metrics, multipliers and
-collisions; the fleet paragraph, from ``results/pixels/fleet.json``, each agent's J_coll alone
-and in the fleet. A test checks that the README holds exactly what this writes.
+The peer paragraph ranks, per map of ``results/state/peers.json``, every learner by its worst
+seed's largest metric over its threshold, and says whether an OmniSafe learner beats CRLLK-D;
+the traffic paragraph, per task of ``results/pixels/traffic.json``, each agent's seeds that
+hold, its metrics, multipliers and collisions; the fleet paragraph, from
+``results/pixels/fleet.json``, each agent's J_coll alone and in the fleet. A test checks that
+the README holds exactly what this writes, and worked documents check the counts.
 """
 
 from __future__ import annotations
@@ -23,6 +22,8 @@ from __future__ import annotations
 import json
 import sys
 from pathlib import Path
+
+from crllk.evaluation.intervals import wilson_interval
 
 REPO = Path(__file__).resolve().parents[1]
 TABLES = {"small_loop": "table1.json", "zigzag": "table_zigzag.json",
@@ -68,41 +69,49 @@ def _held_at_bound(entry: dict, thresholds: dict) -> int:
 CRLLK_AGENTS = ("CRLLK-D", "CRLLK-C")
 """The learned-multiplier agents whose deployed policies and blocked direction are reported."""
 
+DEPLOYED_NAMES = {"expected_duty": "expected duties", "expected_action": "expected action"}
+"""How a table's ``mode.deployed`` entry names the deployed policy."""
+
 
 def _deployed_and_blocked(documents: dict[str, dict]) -> str:
-    """Two sentences: the CRLLK agents' deployed policies' seeds that hold both constraints
-    (point estimate, 95 % upper bound) per map, and on ``obstacle_loop`` the seeds whose
-    episodes in the direction the obstacles block hold each constraint alone."""
-    deployed = []
+    """Two small tables: per CRLLK agent and map, the deployed policy's seeds that hold both
+    constraints (point estimate, then 95 % upper bound); and on ``obstacle_loop``, per agent
+    and policy, the seeds whose episodes started in the direction the obstacles block hold
+    each constraint on the point estimate."""
+    lines = ["| deployed policy | " + " | ".join(f"`{task}`" for task in documents) + " |",
+             "| --- |" + " --- |" * len(documents)]
     for agent in CRLLK_AGENTS:
-        cells = []
-        for task, document in documents.items():
-            mode = document["agents"][agent]["mode"]
-            cells.append(f"`{task}` {sum(mode['satisfied'])} and "
-                         f"{_held_at_bound(mode, document['thresholds'])}")
-        deployed.append(f"{agent} " + ", ".join(cells))
+        modes = [document["agents"][agent]["mode"] for document in documents.values()]
+        kinds = sorted({kind for mode in modes for kind in mode["deployed"]})
+        cells = [f"{sum(mode['satisfied'])} of {len(mode['runs'])} "
+                 f"({_held_at_bound(mode, document['thresholds'])} at the 95 % bound)"
+                 for mode, document in zip(modes, documents.values(), strict=True)]
+        name = ", ".join(DEPLOYED_NAMES.get(kind, kind) for kind in kinds)
+        lines.append(f"| {agent} ({name}) | " + " | ".join(cells) + " |")
     document = documents["obstacle_loop"]
     thresholds = document["thresholds"]
-    blocked = []
+    rows, episodes = [], set()
     for agent in CRLLK_AGENTS:
         entry = document["agents"][agent]
-        parts = []
         for name, source in (("sampled", entry), ("deployed", entry["mode"])):
-            directions = [seed["intended"] for seed in source["by_direction"]]
-            coll = sum(d["J_coll"] <= thresholds["collision"] for d in directions)
-            lane = sum(d["J_clane"] <= thresholds["lane"] for d in directions)
-            lanes = [d["J_clane"] for d in directions]
-            parts.append(f"{name} J_coll on {coll} and J_clane on {lane} of {len(directions)} "
-                         f"(J_clane {min(lanes):.2f}–{max(lanes):.2f} dm)")
-        blocked.append(f"{agent} " + ", ".join(parts))
-    episodes = sorted({seed["intended"]["episodes"] for agent in CRLLK_AGENTS
-                       for seed in document["agents"][agent]["by_direction"]})
-    count = str(episodes[0]) if len(episodes) == 1 else f"{episodes[0]}–{episodes[-1]}"
-    return ("The CRLLK agents' deployed policies (expected duties, expected actions), seeds that "
-            "hold both constraints on the point estimate and at the 95 % upper bound: "
-            + "; ".join(deployed) + ". On `obstacle_loop`, in the direction the obstacles block "
-            f"alone ({count} of each run's 400 test episodes), the seeds that hold each "
-            "constraint: " + "; ".join(blocked) + ".")
+            blocked = [seed["intended"] for seed in source["by_direction"]]
+            episodes |= {seed["episodes"] for seed in blocked}
+            coll = sum(seed["J_coll"] <= thresholds["collision"] for seed in blocked)
+            lane = sum(seed["J_clane"] <= thresholds["lane"] for seed in blocked)
+            lanes = [seed["J_clane"] for seed in blocked]
+            rows.append(f"| {agent}, {name} | {coll} of {len(blocked)} | {lane} of "
+                        f"{len(blocked)} ({min(lanes):.2f}–{max(lanes):.2f} dm) |")
+    fewest, most = min(episodes), max(episodes)
+    count = str(fewest) if fewest == most else f"{fewest}–{most}"
+    clean = wilson_interval(0, fewest)[1]  # the 95 % upper bound of 0 collisions in them
+    return "\n".join([
+        *lines, "",
+        f"On `obstacle_loop`, the episodes that start in the direction the obstacles block "
+        f"({count} of each run's 400), seeds that hold each constraint on the point estimate "
+        f"(at the 95 % bound none could hold J_coll: 0 collisions in {fewest} episodes still "
+        f"allow {clean:.3f}):", "",
+        f"| agent, policy | J_coll ≤ {thresholds['collision']} | J_clane ≤ {thresholds['lane']} "
+        "dm |", "| --- | --- | --- |", *rows])
 
 
 def _worst(entry: dict, thresholds: dict) -> tuple[float, float, float]:

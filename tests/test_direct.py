@@ -29,6 +29,7 @@ def _batch() -> TensorDict:
 def test_the_actor_s_distribution_is_get_dist_s(action, config, commands):
     spec = Categorical(3) if action == "discrete" else Bounded(-1.0, 1.0, shape=(2,))
     actor = make_actor("state", STATE, action, spec, config, commands_dim=commands)
+    assert is_plain(actor.module[0])  # the direct path is the one compared
     ours, theirs = _batch(), _batch()
     ours_dist = actor_distribution(actor, ours)
     theirs_dist = actor.get_dist(theirs)
@@ -66,7 +67,12 @@ def test_other_modules_run_through_their_wrappers():
                                                   out_keys=["w"]))
     copying = TensorDictModule(torch.nn.Identity(), in_keys=["x"], out_keys=["v"],
                                inplace=False)
-    for module in (keyword, chain, copying):
+    hooked = TensorDictModule(torch.nn.Identity(), in_keys=["x"], out_keys=["u"])
+    hooked.register_forward_hook(lambda module, inputs, output: output)
+    selected = TensorDictModule(_Pair(), in_keys=["x"], out_keys=["p", "q"]).select_out_keys("q")
+    reading = TensorDictModule(torch.nn.Identity(), in_keys=["x"], out_keys=["r"],
+                               get_kwargs={"default": None})
+    for module in (keyword, chain, copying, hooked, selected, reading):
         assert not is_plain(module)
     td = TensorDict({"x": torch.ones(3), "y": torch.zeros(3)}, batch_size=[3])
     run_module(keyword, td)
@@ -75,3 +81,12 @@ def test_other_modules_run_through_their_wrappers():
     assert torch.equal(td["w"], td["x"])
     run_module(copying, td)
     assert "v" not in set(td.keys())  # the copy got it, as module(td) leaves it
+    run_module(selected, td)
+    assert "q" in set(td.keys()) and "p" not in set(td.keys())
+
+
+class _Pair(torch.nn.Module):
+    """Two outputs, of which a module may select one."""
+
+    def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        return x, 2 * x

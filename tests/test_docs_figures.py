@@ -440,3 +440,33 @@ def test_the_parity_table_is_the_committed_parity_output():
     text = prose("sim-to-real.md")
     default = [float(v) for shares in runs[2:] for v in shares]
     assert f"on {min(default):.1f}–{max(default):.1f} % of frames" in text
+
+
+def test_the_deployed_and_blocked_tables_worked_example():
+    """Seeds count at the 95 % bound only when both upper ends are within the thresholds; the
+    blocked direction counts each constraint on its own, for the sampled and deployed
+    policies, and names the deployed policy by its kind."""
+    spec = importlib.util.spec_from_file_location("readme_results",
+                                                  REPO / "scripts" / "readme_results.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    thresholds = {"lane": 0.5, "collision": 0.02}
+
+    def policy(satisfied, lane_upper, coll_upper, blocked):
+        return {"runs": ["a", "b"], "satisfied": satisfied, "deployed": ["expected_duty"],
+                "intervals": {"J_clane": [[0.1, u] for u in lane_upper],
+                              "J_coll": [[0.0, u] for u in coll_upper]},
+                "by_direction": [{"intended": {"episodes": 160, "J_clane": lane,
+                                               "J_coll": coll}} for lane, coll in blocked]}
+
+    sampled = policy([True, True], [0.4, 0.6], [0.019, 0.01], [(0.7, 0.01), (0.45, 0.03)])
+    deployed = policy([True, False], [0.4, 0.4], [0.02, 0.021], [(0.6, 0.0), (0.5, 0.02)])
+    assert module._held_at_bound(sampled, thresholds) == 1  # the second seed's lane: 0.6
+    assert module._held_at_bound(deployed, thresholds) == 1  # 0.021 > 0.02
+    document = {"thresholds": thresholds,
+                "agents": {a: {**sampled, "mode": deployed} for a in module.CRLLK_AGENTS}}
+    text = module._deployed_and_blocked({"obstacle_loop": document})
+    assert "| CRLLK-D (expected duties) | 1 of 2 (1 at the 95 % bound) |" in text
+    assert "| CRLLK-C, sampled | 1 of 2 | 1 of 2 (0.45–0.70 dm) |" in text
+    assert "| CRLLK-C, deployed | 2 of 2 | 1 of 2 (0.50–0.60 dm) |" in text
+    assert "(160 of each run's 400)" in text and "in 160 episodes still allow 0.023" in text

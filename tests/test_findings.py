@@ -1149,6 +1149,8 @@ def _crllk_c_trial_row(root: Path, label: str, run: str, sampled_name: str
     assert all(d["evaluation"]["seed"] == 1_000_000 and d["evaluation"]["episodes"] == 400
                for d in (sampled, deployed))
     assert deployed["evaluation"]["deployed"] == "expected_action"
+    assert sampled["evaluation"]["deterministic"] is False
+    assert f"\nseed: {label.rsplit(' ', 1)[1]}\n" in (root / run / "config.yaml").read_text()
     with (root / run / "metrics.csv").open() as handle:
         rows = list(csv.DictReader(handle))
     late = [r for r in rows if 400 <= int(r["iteration"]) <= 489]
@@ -1275,19 +1277,30 @@ def test_crllk_c_s_cost_discount_rows_are_their_evaluations():
     assert f"Seed 1's expected action missed α2 ({hits[True][1][1]} of 400)" in text
     assert hits[True][0][1] == 0
     assert f"ends {hits[True][0][0]} of them on an obstacle or off the road" in text
-    assert (f"A collision 60 steps ahead now weighs {0.99 ** 60:.2f} in the critic's target "
-            f"({0.95 ** 60:.2f} at 0.95)") in text
-    correlations, confident = [], []
-    for label, run, _ in COST_DISCOUNT_C_RUNS[2:]:
-        fit = _collision_critic_row(root, label, run, 0.99)
-        assert fit["lead"][0]["predicted"] < fit["lead"][0]["realised"] / 10
-        correlations.append(f"{fit['realised_correlation']:.3f}")
-        confident.append(next(b for b in fit["calibration"] if b["from"] == 0.1))
+    config = (root / COST_DISCOUNT_C_RUNS[2][1] / "config.yaml").read_text()
+    assert "gae_lambda: 0.95" in config and "minibatch_size: 512" in config
+    assert (f"A collision 60 steps ahead now weighs {0.99 ** 60:.2f} in the cost-to-go the "
+            f"critic estimates ({0.95 ** 60:.2f} at 0.95), and {(0.99 * 0.95) ** 60:.3f} "
+            f"directly in its GAE target ({(0.95 * 0.95) ** 60:.3f} at 0.95)") in text
+
+    def share(gamma: float, lam: float = 0.95) -> str:  # the λ-return's bootstrapped part
+        return f"{gamma * (1 - lam) / (1 - gamma * lam):.2f}"
+
+    assert f"γ(1 − λ) / (1 − γλ), {share(0.99)} at γ 0.99 against {share(0.95)} at 0.95" in text
+    fits = [_collision_critic_row(root, label, run, 0.99)
+            for label, run, _ in COST_DISCOUNT_C_RUNS[2:]]
+    assert all(f["lead"][0]["predicted"] < f["lead"][0]["realised"] / 10 for f in fits)
+    assert f"(the rows average {fits[0]['cost_steps']} and {fits[1]['cost_steps']} approaches)" \
+        in text
+    confident = [next(b for b in f["calibration"] if b["from"] == 0.1) for f in fits]
     assert all(b["to"] == 0.3 and b["predicted"] > b["realised"] for b in confident)
-    assert (f"correlate with the realised cost-to-go {correlations[0]} and {correlations[1]}"
+    assert (f"as high ({fits[0]['explained_variance']:.3f} and {fits[1]['explained_variance']:.3f}"
+            f", correlation {fits[0]['correlation']:.3f} and {fits[1]['correlation']:.3f}), and "
+            f"its correlation with the realised cost-to-go is only "
+            f"{fits[0]['realised_correlation']:.3f} and {fits[1]['realised_correlation']:.3f}"
             ) in text
     assert (f"({confident[0]['predicted']:.3f} and {confident[1]['predicted']:.3f}, followed "
-            f"by {confident[0]['realised']:.3f} and {confident[1]['realised']:.3f})") in text
+            f"by {confident[0]['realised']:.3f} and {confident[1]['realised']:.3f};") in text
 
 
 STATE_SPREAD_RUNS = (("default, seed 0", "CRLLK-C-a0.5-seed0", "eval-400"),
@@ -1303,19 +1316,35 @@ def test_the_state_dependent_spread_rows_are_their_evaluations():
 
     root = REPO / "results/runs/pixels/obstacle_loop"
     text = " ".join(FINDINGS.split())
-    hits, reverse, kl = {}, [], {}
+    hits, reverse, kl, blocked = {}, [], {}, {}
+    off_road, late_coll, multipliers, rates = [], [], [], set()
     for label, run, sampled_name in STATE_SPREAD_RUNS:
         sampled, _, late, j_coll = _crllk_c_trial_row(root, label, run, sampled_name)
         trial = "statestd" in run
         assert bool(_model_setting(root / run, "state_dependent_std")) == trial
         hits.setdefault(trial, []).append(_endings(sampled))
         kl.setdefault(trial, []).append(sum(float(r["kl_approx"]) for r in late) / len(late))
+        reverse.append(sampled["breakdown"]["by_direction"]["reverse"]["J_coll"])
+        blocked.setdefault(trial, []).append(
+            sampled["breakdown"]["by_direction"]["intended"]["J_clane"])
         if trial:
-            reverse.append(sampled["breakdown"]["by_direction"]["reverse"]["J_coll"])
-            assert f"{sum(j_coll) / len(j_coll):.3f}" in text
+            off_road.append(sampled["terminations"].get("off_road", 0))
+            late_coll.append(f"{sum(j_coll) / len(j_coll):.3f}")
+            multipliers.append(f"{float(late[-1]['lambda_collision']):.1f}")
+        rates.add(next(line for line in (root / run / "config.yaml").read_text().splitlines()
+                       if line.strip().startswith("lr:")))
     assert (f"ended {hits[True][0]} and {hits[True][1]} of their 400 validation episodes on an "
-            f"obstacle or off the road (against {hits[False][0]} and {hits[False][1]})") in text
-    assert f"(J_coll {reverse[0]:.3f} and {reverse[1]:.3f} there)" in text
+            f"obstacle or off the road (against {hits[False][0]} and {hits[False][1]};") in text
+    assert (f"(J_coll {reverse[2]:.3f} and {reverse[3]:.3f} there, against {reverse[0]:.3f} and "
+            f"{reverse[1]:.3f})") in text
+    assert (f"(against {hits[False][0]} and {hits[False][1]}; {off_road[0]} and {off_road[1]} of "
+            "them off the road)") in text
+    assert (f"still collided {late_coll[0]} and {late_coll[1]} per episode over iterations "
+            f"400–489 with λ_coll at {multipliers[0]} and {multipliers[1]}") in text
+    assert (f"(sampled {blocked[True][0]:.3f} and {blocked[True][1]:.3f} dm, against "
+            f"{blocked[False][0]:.3f} and {blocked[False][1]:.3f})") in text
+    assert max(blocked[True]) < min(blocked[False])
+    assert len(rates) == 1  # "at the same learning rate"
     assert (f"(mean approximate KL over those iterations {kl[True][0]:.3f} and "
             f"{kl[True][1]:.3f}, against {kl[False][0]:.4f} and {kl[False][1]:.4f})") in text
     assert min(kl[True]) > 8 * max(kl[False])

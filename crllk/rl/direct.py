@@ -12,14 +12,17 @@ from torchrl.modules import ProbabilisticActor, ValueOperator
 def is_plain(module: object) -> bool:
     """Whether ``module(tensordict)`` only calls its network on the entries of its
     ``in_keys``, in order, and sets its outputs under its ``out_keys`` in place (a plain
-    :class:`TensorDictModule` or :class:`ValueOperator`: no keyword inputs, no method, no
-    copy)."""
+    :class:`TensorDictModule` or :class:`ValueOperator`: no keyword inputs, method, reading
+    options, hooks, selected outputs or copy)."""
     return (type(module) in (TensorDictModule, ValueOperator)
             and getattr(module, "_kwargs", None) is None
             and getattr(module, "method", None) is None
             and not getattr(module, "method_kwargs", None)
-            and not getattr(module, "get_kwargs", None)
+            and not getattr(module, "_get_kwargs", None)
             and getattr(module, "inplace", True) is True
+            and not module._forward_hooks and not module._forward_pre_hooks
+            and list(module.out_keys) == list(getattr(module, "out_keys_source",
+                                                      module.out_keys))
             and "_" not in module.out_keys)
 
 

@@ -8,7 +8,7 @@ deterministic action, which steers harder whenever the noise is large. :class:`E
 computes E[tanh(x)] per action dimension by the trapezoid rule on a fixed grid of standard
 normal points (:data:`GRID_POINTS` over ±:data:`GRID_HALF_WIDTH`; within 1e-11 of the exact
 integral in float64 for scales up to 3: a state-dependent spread is bounded below that,
-:data:`~crllk.rl.model_config.STATE_LOG_STD_RANGE`).
+:data:`~crllk.rl.model_config.STATE_LOG_STD_RANGE`, and every learned one so far ended below 1).
 """
 
 from __future__ import annotations

@@ -17,6 +17,7 @@ the same draw that TorchRL's ``ProbabilisticActor`` writes.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 import torch
@@ -24,6 +25,8 @@ from tensordict import TensorDictBase
 from torch.distributions import Categorical, Distribution, Normal
 from torch.distributions.utils import _sum_rightmost
 from torchrl.modules import ProbabilisticActor, TanhNormal
+
+from crllk.rl.direct import is_plain
 
 ACTION_NOISE_TAG = 0xAC7
 """Mixed into the run's seed for the action streams, so they never equal the spawn streams
@@ -146,6 +149,9 @@ def sample_actions(actor: ProbabilisticActor, tensordict: TensorDictBase,
     if tensordict.batch_size != torch.Size([count]):
         raise ValueError(f"{count} action streams for a batch of {tuple(tensordict.batch_size)}")
     network, sampler = actor.module[0], actor.module[-1]  # parameters, then the sample
+    if not is_plain(network):  # tensordict's own call, unpadded
+        network(tensordict)
+        return _draw_into(tensordict, sampler, noise)
     inputs = [tensordict.get(key) for key in network.in_keys]
     padded_count = -(-count // POLICY_ROWS) * POLICY_ROWS
     if padded_count != count:
@@ -155,6 +161,12 @@ def sample_actions(actor: ProbabilisticActor, tensordict: TensorDictBase,
     outputs = outputs if isinstance(outputs, tuple) else (outputs,)
     for key, value in zip(network.out_keys, outputs, strict=True):
         tensordict.set(key, value[:count])
+    return _draw_into(tensordict, sampler, noise)
+
+
+def _draw_into(tensordict: TensorDictBase, sampler: Any, noise: ActionNoise) -> TensorDictBase:
+    """The action and its log-probability drawn from the distribution whose parameters are in
+    ``tensordict``, written into it under the sampler's keys."""
     if (sampler.distribution_class is Categorical and list(sampler.dist_keys) == ["logits"]
             and not sampler.distribution_kwargs):  # the distribution takes the logits as is
         action, log_prob = draw_categorical(tensordict.get(sampler.in_keys[0]), noise)
