@@ -1172,13 +1172,15 @@ def _collision_critic_row(root: Path, label: str, run: str, cost_gamma: float) -
     return fit
 
 
-SEPARATE_CRITIC_RUNS = (("default, seed 0", "CRLLK-C-a0.5-seed0", "eval-400"),
-                        ("default, seed 1", "CRLLK-C-a0.5-seed1", "eval-400"),
-                        ("separate critics, seed 0", "CRLLK-C-separatecritics-a0.5-seed0",
-                         "val400"),
-                        ("separate critics, seed 1", "CRLLK-C-separatecritics-a0.5-seed1",
-                         "val400"))
-"""The separate-critics trial's rows: label, run directory, its sampled 400-episode evaluation."""
+def _crllk_c_trial_runs(label: str, tag: str) -> tuple[tuple[str, str, str], ...]:
+    """A CRLLK-C trial's rows against the default's (seeds 0 and 1): label, run directory and
+    its sampled 400-episode evaluation."""
+    return (*((f"default, seed {s}", f"CRLLK-C-a0.5-seed{s}", "eval-400") for s in (0, 1)),
+            *((f"{label}, seed {s}", f"CRLLK-C-{tag}-a0.5-seed{s}", "val400") for s in (0, 1)))
+
+
+SEPARATE_CRITIC_RUNS = _crllk_c_trial_runs("separate critics", "separatecritics")
+"""The separate-critics trial's rows."""
 
 
 def test_the_separate_critics_rows_are_their_evaluations_and_critics():
@@ -1239,13 +1241,8 @@ def test_the_separate_critics_rows_are_their_evaluations_and_critics():
     assert f"with {collisions[0]} and {collisions[1]} collisions in 61,440 steps" in text
 
 
-COST_DISCOUNT_C_RUNS = (("default, seed 0", "CRLLK-C-a0.5-seed0", "eval-400"),
-                        ("default, seed 1", "CRLLK-C-a0.5-seed1", "eval-400"),
-                        ("`ppo.cost_gamma=0.99`, seed 0", "CRLLK-C-costgamma99-a0.5-seed0",
-                         "val400"),
-                        ("`ppo.cost_gamma=0.99`, seed 1", "CRLLK-C-costgamma99-a0.5-seed1",
-                         "val400"))
-"""CRLLK-C's cost-discount trial: label, run directory, its sampled 400-episode evaluation."""
+COST_DISCOUNT_C_RUNS = _crllk_c_trial_runs("`ppo.cost_gamma=0.99`", "costgamma99")
+"""CRLLK-C's cost-discount trial's rows."""
 
 
 def test_crllk_c_s_cost_discount_rows_are_their_evaluations():
@@ -1303,11 +1300,8 @@ def test_crllk_c_s_cost_discount_rows_are_their_evaluations():
             f"by {confident[0]['realised']:.3f} and {confident[1]['realised']:.3f};") in text
 
 
-STATE_SPREAD_RUNS = (("default, seed 0", "CRLLK-C-a0.5-seed0", "eval-400"),
-                     ("default, seed 1", "CRLLK-C-a0.5-seed1", "eval-400"),
-                     ("state-dependent spread, seed 0", "CRLLK-C-statestd-a0.5-seed0", "val400"),
-                     ("state-dependent spread, seed 1", "CRLLK-C-statestd-a0.5-seed1", "val400"))
-"""CRLLK-C's state-dependent-spread trial: label, run directory, sampled 400-episode file."""
+STATE_SPREAD_RUNS = _crllk_c_trial_runs("state-dependent spread", "statestd")
+"""CRLLK-C's state-dependent-spread trial's rows."""
 
 
 def test_the_state_dependent_spread_rows_are_their_evaluations():
